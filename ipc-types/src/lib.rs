@@ -1,1 +1,581 @@
-//! placeholder
+//! The sample types that shoal's processes exchange over iceoryx2, and the
+//! functions that build their service names. Nothing else lives here.
+//!
+//! Every sample is `#[repr(C)]`, `Copy`, fixed-size, pointer-free and
+//! `bytemuck::Pod` (so every pad byte is an explicit `_padN` field), starts
+//! with the common [`Header`], and carries a versioned iceoryx2 type name
+//! (`shoal.Nav.v1`): a layout change is a new name, so iceoryx2 refuses a
+//! mismatched peer instead of misreading it. Field names carry units and
+//! frames. Frames: world NED (x north, y east, z down); body x forward,
+//! y starboard, z down (Fossen). Quaternions are `[w, x, y, z]`, body → NED
+//! unless the name says otherwise.
+//!
+//! ```
+//! use ipc_types::{Nav, Sample, service_name, Channel};
+//! let mut nav = Nav::zeroed();
+//! nav.header.seq = 7;
+//! assert_eq!(Nav::TYPE_NAME, "shoal.Nav.v1");
+//! assert_eq!(service_name("ab12", "F1", Channel::Nav), "shoal/ab12/F1/nav");
+//! let schema = ipc_types::schema::ros2msg_schema::<Nav>().unwrap();
+//! assert!(schema.starts_with("shoal/Header header\n"));
+//! ```
+
+pub mod schema;
+
+use iceoryx2::prelude::ZeroCopySend;
+pub use schema::{Described, FieldDesc, FieldType, TypeDesc};
+
+/// Most vehicles a run can hold (the world snapshot is fixed-size).
+pub const MAX_VEHICLES: usize = 256;
+/// Most sonar beams per vehicle.
+pub const MAX_BEAMS: usize = 16;
+/// Most light beacons on a parent.
+pub const MAX_BEACONS: usize = 8;
+
+/// A sample type: a described, Pod, zero-copy struct with the common header.
+pub trait Sample:
+    Copy + bytemuck::Pod + ZeroCopySend + Described + std::fmt::Debug + Send + 'static
+{
+    /// The versioned iceoryx2 type name, e.g. `shoal.Nav.v1`.
+    const TYPE_NAME: &'static str;
+    /// The common header.
+    fn header(&self) -> &Header;
+    /// The common header, mutable.
+    fn header_mut(&mut self) -> &mut Header;
+    /// All-zero value (every sample type is valid when zeroed).
+    fn zeroed() -> Self {
+        bytemuck::Zeroable::zeroed()
+    }
+    /// True when every floating-point field is finite.
+    fn is_finite(&self) -> bool {
+        all_finite(bytemuck::bytes_of(self), &Self::fields())
+    }
+}
+
+fn all_finite(bytes: &[u8], fields: &[FieldDesc]) -> bool {
+    fn walk(bytes: &[u8], ty: &TypeDesc, off: &mut usize) -> bool {
+        match ty {
+            TypeDesc::Primitive { ros, size } => {
+                *off = off.next_multiple_of(*size);
+                let b = &bytes[*off..*off + size];
+                *off += size;
+                match *ros {
+                    "float64" => b
+                        .try_into()
+                        .map(|a: [u8; 8]| f64::from_ne_bytes(a).is_finite())
+                        .unwrap_or(false),
+                    "float32" => b
+                        .try_into()
+                        .map(|a: [u8; 4]| f32::from_ne_bytes(a).is_finite())
+                        .unwrap_or(false),
+                    _ => true,
+                }
+            }
+            TypeDesc::Nested { fields, .. } => fields().iter().all(|f| walk(bytes, &f.ty, off)),
+            TypeDesc::Array { elem, len } => (0..*len).all(|_| walk(bytes, elem, off)),
+        }
+    }
+    let mut off = 0;
+    fields.iter().all(|f| walk(bytes, &f.ty, &mut off))
+}
+
+/// Declares a `#[repr(C)]` Pod struct together with its self-description.
+macro_rules! described {
+    (
+        $(#[$meta:meta])*
+        pub struct $name:ident ($ros:literal, $tn:literal) {
+            $( $(#[$fmeta:meta])* pub $field:ident : $ty:ty ),* $(,)?
+        }
+    ) => {
+        $(#[$meta])*
+        #[repr(C)]
+        #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable, ZeroCopySend)]
+        #[type_name($tn)]
+        pub struct $name {
+            $( $(#[$fmeta])* pub $field: $ty ),*
+        }
+        impl Described for $name {
+            const ROS_NAME: &'static str = $ros;
+            fn fields() -> Vec<FieldDesc> {
+                vec![$( FieldDesc { name: schema::ros_field_name(stringify!($field)), ty: <$ty as FieldType>::describe() } ),*]
+            }
+        }
+        impl FieldType for $name {
+            fn describe() -> TypeDesc {
+                TypeDesc::Nested { ros: $ros, fields: <$name as Described>::fields }
+            }
+        }
+    };
+}
+
+/// Declares a sample type: a described struct whose first field is `header`.
+macro_rules! sample {
+    (
+        $(#[$meta:meta])*
+        pub struct $name:ident ($ros:literal, $tn:literal, size = $size:expr) {
+            $( $(#[$fmeta:meta])* pub $field:ident : $ty:ty ),* $(,)?
+        }
+    ) => {
+        described! {
+            $(#[$meta])*
+            pub struct $name ($ros, $tn) {
+                $( $(#[$fmeta])* pub $field: $ty ),*
+            }
+        }
+        impl Sample for $name {
+            const TYPE_NAME: &'static str = $tn;
+            fn header(&self) -> &Header { &self.header }
+            fn header_mut(&mut self) -> &mut Header { &mut self.header }
+        }
+        const _: () = assert!(std::mem::size_of::<$name>() == $size);
+        const _: () = assert!(std::mem::align_of::<$name>() == 8);
+    };
+}
+
+described! {
+    /// The header every sample starts with.
+    ///
+    /// Wall-clock stamps are `CLOCK_MONOTONIC` nanoseconds, one clock shared by
+    /// every process on the machine, so differences between processes are
+    /// latencies. They are the only fields that differ between two lockstep
+    /// runs of the same scenario and seed.
+    pub struct Header("shoal/Header", "shoal.Header.v1") {
+        /// Per-publisher sequence number, from 0, no gaps unless samples were lost.
+        pub seq: u64,
+        /// Simulation time of this sample, ns since the run started.
+        pub sim_time_ns: u64,
+        /// Monotonic wall time when the sample was published, ns.
+        pub publish_mono_ns: u64,
+        /// Monotonic wall time of the sensor event this sample descends from, ns.
+        pub origin_mono_ns: u64,
+        /// Simulation time of that sensor event, ns.
+        pub origin_sim_time_ns: u64,
+    }
+}
+const _: () = assert!(std::mem::size_of::<Header>() == 40);
+
+impl Header {
+    /// Names of the fields that hold wall-clock stamps (excluded from
+    /// determinism hashes).
+    pub const WALL_CLOCK_FIELDS: [&'static str; 2] = ["publish_mono_ns", "origin_mono_ns"];
+}
+
+sample! {
+    /// Ground truth of one vehicle, published by sim-plant. Only sensor
+    /// simulators, the world process and the recorder may read it.
+    pub struct Truth("shoal/Truth", "shoal.Truth.v1", size = 232) {
+        /// Common header.
+        pub header: Header,
+        /// Position of the centre of origin in NED, m.
+        pub position_ned_m: [f64; 3],
+        /// Attitude body → NED, `[w, x, y, z]`.
+        pub q_body_to_ned_wxyz: [f64; 4],
+        /// Roll, pitch, yaw (ZYX Euler), rad; for plots only.
+        pub euler_rpy_rad: [f64; 3],
+        /// Linear velocity in body axes, m/s.
+        pub velocity_body_mps: [f64; 3],
+        /// Angular rates in body axes, rad/s.
+        pub rates_body_radps: [f64; 3],
+        /// Generalised force applied (after saturation): N, N, N, N·m, N·m, N·m.
+        pub tau_applied: [f64; 6],
+        /// `origin_mono_ns` of the thrust sample applied in this step (0: none yet).
+        pub thrust_origin_mono_ns: u64,
+        /// Monotonic wall time at which that thrust was first applied, ns.
+        pub thrust_applied_mono_ns: u64,
+    }
+}
+
+sample! {
+    /// What the vehicle's own navigation sensors report (AHRS, DVL, depth;
+    /// absolute position only for the leader).
+    pub struct Nav("shoal/Nav", "shoal.Nav.v1", size = 184) {
+        /// Common header.
+        pub header: Header,
+        /// Measured attitude body → NED, `[w, x, y, z]`.
+        pub q_body_to_ned_wxyz: [f64; 4],
+        /// Measured roll, pitch, yaw, rad.
+        pub euler_rpy_rad: [f64; 3],
+        /// Measured angular rates in body axes, rad/s.
+        pub rates_body_radps: [f64; 3],
+        /// Measured velocity over ground in body axes (DVL), m/s.
+        pub velocity_body_mps: [f64; 3],
+        /// Measured depth, m (positive down).
+        pub depth_m: f64,
+        /// Absolute position NED, m; valid only where `position_valid` is 1.
+        pub position_ned_m: [f64; 3],
+        /// 1 if `position_ned_m` is a measurement (leader only), else 0.
+        pub position_valid: u8,
+        /// Explicit padding.
+        pub _pad0: [u8; 7],
+    }
+}
+
+sample! {
+    /// Generalised thrust command, published by mpc and applied by sim-plant.
+    pub struct Thrust("shoal/Thrust", "shoal.Thrust.v1", size = 96) {
+        /// Common header.
+        pub header: Header,
+        /// Forces N (x, y, z) and moments N·m (x, y, z) in body axes, saturated.
+        pub tau: [f64; 6],
+        /// 1 if this command is the solver-failure fallback, else 0.
+        pub fallback: u8,
+        /// Bit i set when axis i hit its thrust limit.
+        pub saturated_mask: u8,
+        /// Explicit padding.
+        pub _pad0: [u8; 6],
+    }
+}
+
+described! {
+    /// One vehicle's pose inside the world snapshot.
+    pub struct VehiclePose("shoal/VehiclePose", "shoal.VehiclePose.v1") {
+        /// Position NED, m.
+        pub position_ned_m: [f64; 3],
+        /// Attitude body → NED, `[w, x, y, z]`.
+        pub q_body_to_ned_wxyz: [f64; 4],
+        /// Velocity in NED, m/s.
+        pub velocity_ned_mps: [f64; 3],
+    }
+}
+
+sample! {
+    /// One fixed-size snapshot of every vehicle's true pose, published by the
+    /// world process so sensors read one sample instead of every `truth`.
+    pub struct World("shoal/World", "shoal.World.v1", size = 48 + 80 * MAX_VEHICLES) {
+        /// Common header.
+        pub header: Header,
+        /// Number of vehicles in `vehicles` (scenario order).
+        pub count: u32,
+        /// Bit-free flags: number of vehicles whose truth is older than this tick.
+        pub stale: u32,
+        /// Poses in scenario order.
+        pub vehicles: [VehiclePose; MAX_VEHICLES],
+    }
+}
+
+sample! {
+    /// A rangefinder scan: n ranges with beam angles and validity.
+    pub struct Sonar("shoal/Sonar", "shoal.Sonar.v1", size = 448) {
+        /// Common header.
+        pub header: Header,
+        /// Measured range per beam, m; meaningful where `valid` is 1.
+        pub ranges_m: [f64; MAX_BEAMS],
+        /// Beam azimuth in body axes (positive to starboard), rad.
+        pub azimuth_rad: [f64; MAX_BEAMS],
+        /// Beam elevation in body axes (positive down), rad.
+        pub elevation_rad: [f64; MAX_BEAMS],
+        /// 1 = return within range, 0 = no return.
+        pub valid: [u8; MAX_BEAMS],
+        /// Number of beams in use.
+        pub count: u32,
+        /// Explicit padding.
+        pub _pad0: u32,
+    }
+}
+
+sample! {
+    /// Beacon pixels as the follower's camera sees its parent.
+    pub struct Beacons("shoal/Beacons", "shoal.Beacons.v1", size = 184) {
+        /// Common header.
+        pub header: Header,
+        /// Pixel coordinates `u0, v0, u1, v1, ...`, px (origin top-left).
+        pub pixels_uv: [f64; 2 * MAX_BEACONS],
+        /// 1 if beacon i is visible in this frame.
+        pub visible: [u8; MAX_BEACONS],
+        /// Number of beacons on the parent.
+        pub count: u32,
+        /// Number visible in this frame.
+        pub visible_count: u32,
+    }
+}
+
+sample! {
+    /// The parent's pose in the follower's body frame, solved from beacon
+    /// pixels alone (paper eqs. 1-3). Never a wild guess: see `valid`.
+    pub struct LeaderPose("shoal/LeaderPose", "shoal.LeaderPose.v1", size = 424) {
+        /// Common header.
+        pub header: Header,
+        /// Parent position in the follower body frame (eq. 3), m.
+        pub parent_position_body_m: [f64; 3],
+        /// Parent attitude in the follower body frame (parent → follower body), `[w, x, y, z]`.
+        pub q_parent_to_body_wxyz: [f64; 4],
+        /// Follower position in the parent's body frame (eq. 1), m.
+        pub follower_in_parent_m: [f64; 3],
+        /// Covariance of `[position, rotation vector]` in the body frame (row-major 6×6).
+        pub covariance: [f64; 36],
+        /// Root-mean-square reprojection error, px.
+        pub reprojection_rms_px: f64,
+        /// 1 if the estimate is valid, else 0.
+        pub valid: u8,
+        /// Number of beacons the fit used.
+        pub beacons_used: u8,
+        /// Explicit padding.
+        pub _pad0: [u8; 2],
+        /// Solver iterations.
+        pub iterations: u32,
+    }
+}
+
+sample! {
+    /// The target for mpc, in the vehicle's level frame: origin at the vehicle
+    /// now, x along the current heading projected on the horizontal, y to
+    /// starboard (horizontal), z down.
+    pub struct Setpoint("shoal/Setpoint", "shoal.Setpoint.v1", size = 104) {
+        /// Common header.
+        pub header: Header,
+        /// Where the vehicle should be, level frame, m.
+        pub position_m: [f64; 3],
+        /// How that target moves, level frame, m/s (feed-forward).
+        pub velocity_mps: [f64; 3],
+        /// Desired heading minus current heading, rad.
+        pub yaw_rel_rad: f64,
+        /// Planner mode (see the planner crate).
+        pub mode: u32,
+        /// Explicit padding.
+        pub _pad0: u32,
+    }
+}
+
+sample! {
+    /// The planner's internal state, for plots and debugging.
+    pub struct PlannerState("shoal/PlannerState", "shoal.PlannerState.v1", size = 144) {
+        /// Common header.
+        pub header: Header,
+        /// Nominal slot in the parent's frame, m.
+        pub slot_nominal_m: [f64; 3],
+        /// Slot shifted for obstacle avoidance (eq. 8), parent frame, m.
+        pub slot_shifted_m: [f64; 3],
+        /// Low-pass filtered slot (eq. 9), parent frame, m.
+        pub slot_filtered_m: [f64; 3],
+        /// Smallest proximity δ of a sonar return to the predicted track (eq. 7), m.
+        pub delta_min_m: f64,
+        /// Age of the parent estimate, s.
+        pub parent_age_s: f64,
+        /// Distance to the current waypoint (leader), m.
+        pub waypoint_distance_m: f64,
+        /// Planner mode.
+        pub mode: u32,
+        /// 1 if the parent estimate is valid.
+        pub parent_valid: u8,
+        /// 1 while shifting to avoid an obstacle.
+        pub avoiding: u8,
+        /// Explicit padding.
+        pub _pad0: [u8; 2],
+    }
+}
+
+sample! {
+    /// What the predictive controller did this step.
+    pub struct MpcStats("shoal/MpcStats", "shoal.MpcStats.v1", size = 72) {
+        /// Common header.
+        pub header: Header,
+        /// Solve wall time, ns.
+        pub solve_ns: u64,
+        /// Optimal cost.
+        pub cost: f64,
+        /// Solver failures so far (cumulative).
+        pub failures: u64,
+        /// Solver iterations.
+        pub iterations: u32,
+        /// Solver status code (0 = solved).
+        pub status: u32,
+    }
+}
+
+sample! {
+    /// The lockstep clock, published by the orchestrator before each tick.
+    pub struct Clock("shoal/Clock", "shoal.Clock.v1", size = 64) {
+        /// Common header (`sim_time_ns` is the start of this tick).
+        pub header: Header,
+        /// Tick number, from 0.
+        pub tick: u64,
+        /// Tick length, ns.
+        pub tick_ns: u64,
+        /// 1 on the last tick of the run.
+        pub last: u64,
+    }
+}
+
+/// A per-vehicle channel of the channel table in DESIGN.md.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Channel {
+    /// [`Truth`]
+    Truth,
+    /// [`Nav`]
+    Nav,
+    /// [`Thrust`]
+    Thrust,
+    /// [`Sonar`]
+    Sonar,
+    /// [`Beacons`]
+    Beacons,
+    /// [`LeaderPose`]
+    LeaderPose,
+    /// [`Setpoint`]
+    Setpoint,
+    /// [`PlannerState`]
+    PlannerState,
+    /// [`MpcStats`]
+    MpcStats,
+}
+
+impl Channel {
+    /// Every per-vehicle channel.
+    pub const ALL: [Channel; 9] = [
+        Channel::Truth,
+        Channel::Nav,
+        Channel::Thrust,
+        Channel::Sonar,
+        Channel::Beacons,
+        Channel::LeaderPose,
+        Channel::Setpoint,
+        Channel::PlannerState,
+        Channel::MpcStats,
+    ];
+
+    /// The channel's name in service names and MCAP topics.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Channel::Truth => "truth",
+            Channel::Nav => "nav",
+            Channel::Thrust => "thrust",
+            Channel::Sonar => "sonar",
+            Channel::Beacons => "beacons",
+            Channel::LeaderPose => "leader_pose",
+            Channel::Setpoint => "setpoint",
+            Channel::PlannerState => "planner_state",
+            Channel::MpcStats => "mpc_stats",
+        }
+    }
+
+    /// True for channels that carry ground truth.
+    pub const fn is_ground_truth(self) -> bool {
+        matches!(self, Channel::Truth)
+    }
+
+    /// True for channels only followers have (camera-pose output).
+    pub const fn follower_only(self) -> bool {
+        matches!(self, Channel::Beacons | Channel::LeaderPose)
+    }
+}
+
+/// Run-level channels (one per run).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum RunChannel {
+    /// [`World`]
+    World,
+    /// [`Clock`]
+    Clock,
+    /// Event service on which every process reports a finished lockstep step.
+    Done,
+}
+
+impl RunChannel {
+    /// The channel's name in service names.
+    pub const fn name(self) -> &'static str {
+        match self {
+            RunChannel::World => "world",
+            RunChannel::Clock => "clock",
+            RunChannel::Done => "done",
+        }
+    }
+}
+
+/// `shoal/<run-id>/<vehicle>/<channel>`.
+pub fn service_name(run_id: &str, vehicle: &str, channel: Channel) -> String {
+    format!("shoal/{run_id}/{vehicle}/{}", channel.name())
+}
+
+/// `shoal/<run-id>/<channel>` for run-level channels.
+pub fn run_service_name(run_id: &str, channel: RunChannel) -> String {
+    format!("shoal/{run_id}/{}", channel.name())
+}
+
+/// `shoal/<run-id>/<vehicle>/<process>/wake`: the lockstep wake-up event of one process.
+pub fn wake_service_name(run_id: &str, vehicle: &str, process: &str) -> String {
+    format!("shoal/{run_id}/{vehicle}/{process}/wake")
+}
+
+/// The MCAP topic of a per-vehicle channel: `/<vehicle>/<channel>`.
+pub fn topic(vehicle: &str, channel: Channel) -> String {
+    format!("/{vehicle}/{}", channel.name())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn check_layout<T: Sample>() {
+        assert_eq!(
+            schema::cdr_size::<T>(),
+            std::mem::size_of::<T>(),
+            "{} has implicit padding or a field the schema misses",
+            T::TYPE_NAME
+        );
+        let text = schema::ros2msg_schema::<T>().unwrap();
+        assert!(text.contains("shoal/Header header"));
+        assert!(!text.contains(" _"), "rust pad names leak into {text}");
+    }
+
+    #[test]
+    fn every_sample_layout_matches_its_schema() {
+        check_layout::<Truth>();
+        check_layout::<Nav>();
+        check_layout::<Thrust>();
+        check_layout::<World>();
+        check_layout::<Sonar>();
+        check_layout::<Beacons>();
+        check_layout::<LeaderPose>();
+        check_layout::<Setpoint>();
+        check_layout::<PlannerState>();
+        check_layout::<MpcStats>();
+        check_layout::<Clock>();
+    }
+
+    #[test]
+    fn nested_types_get_msg_sections() {
+        let text = schema::ros2msg_schema::<World>().unwrap();
+        assert!(text.contains("shoal/VehiclePose[256] vehicles"));
+        assert!(text.contains("MSG: shoal/VehiclePose\nfloat64[3] position_ned_m"));
+        assert!(text.contains("MSG: shoal/Header\nuint64 seq"));
+    }
+
+    #[test]
+    fn non_finite_values_are_detected() {
+        let mut nav = Nav::zeroed();
+        assert!(nav.is_finite());
+        nav.depth_m = f64::NAN;
+        assert!(!nav.is_finite());
+        let mut w = World::zeroed();
+        w.vehicles[200].velocity_ned_mps[2] = f64::INFINITY;
+        assert!(!w.is_finite());
+    }
+
+    #[test]
+    fn service_names_separate_runs_and_vehicles() {
+        assert_ne!(
+            service_name("a", "F1", Channel::Nav),
+            service_name("b", "F1", Channel::Nav)
+        );
+        assert_eq!(run_service_name("r", RunChannel::World), "shoal/r/world");
+        assert_eq!(wake_service_name("r", "L", "mpc"), "shoal/r/L/mpc/wake");
+    }
+
+    proptest! {
+        #[test]
+        fn nav_bytes_round_trip(vals in proptest::collection::vec(-1e6f64..1e6, 17), seq in any::<u64>()) {
+            let mut nav = Nav::zeroed();
+            nav.header.seq = seq;
+            nav.q_body_to_ned_wxyz.copy_from_slice(&vals[0..4]);
+            nav.euler_rpy_rad.copy_from_slice(&vals[4..7]);
+            nav.rates_body_radps.copy_from_slice(&vals[7..10]);
+            nav.velocity_body_mps.copy_from_slice(&vals[10..13]);
+            nav.depth_m = vals[13];
+            nav.position_ned_m.copy_from_slice(&vals[14..17]);
+            let bytes = bytemuck::bytes_of(&nav).to_vec();
+            let back: Nav = bytemuck::pod_read_unaligned(&bytes);
+            prop_assert_eq!(back, nav);
+        }
+    }
+}

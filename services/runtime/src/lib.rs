@@ -1,1 +1,509 @@
-//! placeholder
+//! The one service loop every shoal process runs: an iceoryx2 node in the
+//! run's own domain, typed ports with explicit service limits, the lockstep
+//! clock and the realtime timer, header stamping, and a clean exit on
+//! SIGINT/SIGTERM.
+//!
+//! A service is a [`Task`]: it opens its ports in its constructor through the
+//! [`Runtime`], then [`Runtime::run`] calls [`Task::step`] once per wake-up:
+//!
+//! - **lockstep**: the orchestrator publishes the [`Clock`](ipc_types::Clock)
+//!   and notifies the process's wake event on the ticks where it is due; the
+//!   process steps on the samples stamped *before* this tick (later ones are
+//!   held back for the next step, so the result does not depend on who ran
+//!   first), then notifies `done` with its own event id.
+//! - **realtime**: the process wakes on its own interval on the wall clock;
+//!   a wake-up later than one period is a deadline miss.
+//!
+//! Processes never busy-poll: they block in an iceoryx2 [`WaitSet`].
+//!
+//! ```no_run
+//! use shoal_runtime::{Runtime, RunArgs, Task, StepContext, TaskError};
+//! struct Idle;
+//! impl Task for Idle {
+//!     fn step(&mut self, _ctx: &StepContext) -> Result<(), TaskError> { Ok(()) }
+//! }
+//! # fn main() -> anyhow::Result<()> {
+//! let args = RunArgs { run_id: "test".into(), vehicle: "L".into(), process: "idle".into(),
+//!     index: 0, mode: shoal_runtime::Mode::Lockstep, period_s: 0.1, epoch_mono_ns: 0,
+//!     processes: 1 };
+//! let rt = Runtime::new(&args)?;
+//! rt.run(Idle)?;
+//! # Ok(()) }
+//! ```
+
+pub mod domain;
+pub mod latency;
+pub mod ports;
+
+use std::time::Duration;
+
+use iceoryx2::prelude::*;
+use ipc_types::{Clock, RunChannel};
+
+pub use domain::{cleanup_domain, iceoryx_config, list_domain_files, ChannelLimits};
+pub use latency::LatencyRecorder;
+pub use ports::{Publisher, Subscriber};
+
+/// How time advances in a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// The orchestrator ticks a clock and waits for every due process.
+    Lockstep,
+    /// Each process runs at its own rate on the wall clock.
+    Realtime,
+}
+
+impl Mode {
+    /// Lower-case name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Mode::Lockstep => "lockstep",
+            Mode::Realtime => "realtime",
+        }
+    }
+}
+
+/// The arguments every service process is started with (the orchestrator
+/// passes them; see `shoal run`).
+#[derive(Debug, Clone, clap::Args)]
+pub struct RunArgs {
+    /// Run identifier: names the iceoryx2 domain and every service.
+    #[arg(long)]
+    pub run_id: String,
+    /// Vehicle this process belongs to (`run` for run-level processes).
+    #[arg(long)]
+    pub vehicle: String,
+    /// Process kind (sim-plant, camera-pose, ...); names the wake event.
+    #[arg(long)]
+    pub process: String,
+    /// This process's index in the run (its `done` event id).
+    #[arg(long)]
+    pub index: usize,
+    /// Number of processes in the run (sizes the `done` event service).
+    #[arg(long)]
+    pub processes: usize,
+    /// Lockstep or realtime.
+    #[arg(long, value_enum, default_value = "lockstep")]
+    pub mode: Mode,
+    /// Step period in seconds (realtime wake-up interval).
+    #[arg(long, default_value_t = 0.1)]
+    pub period_s: f64,
+    /// Monotonic time (ns) at which simulated time 0 starts, realtime only.
+    #[arg(long, default_value_t = 0)]
+    pub epoch_mono_ns: u64,
+}
+
+/// Errors of the runtime.
+#[derive(Debug, thiserror::Error)]
+pub enum RuntimeError {
+    /// The iceoryx2 node could not be created.
+    #[error("cannot create the iceoryx2 node `{name}`: {reason}")]
+    Node {
+        /// Node name.
+        name: String,
+        /// Cause.
+        reason: String,
+    },
+    /// A service could not be opened or created.
+    #[error("cannot open service `{service}`: {reason}")]
+    Service {
+        /// Service name.
+        service: String,
+        /// Cause.
+        reason: String,
+    },
+    /// A port could not be created.
+    #[error("cannot create a port on `{service}`: {reason}")]
+    Port {
+        /// Service name.
+        service: String,
+        /// Cause.
+        reason: String,
+    },
+    /// Sending or receiving failed.
+    #[error("i/o on `{service}` failed: {reason}")]
+    Io {
+        /// Service name.
+        service: String,
+        /// Cause.
+        reason: String,
+    },
+    /// The wait set failed.
+    #[error("waiting failed: {0}")]
+    Wait(String),
+    /// The task's step failed.
+    #[error("step at t = {sim_time_s:.3} s failed: {source}")]
+    Task {
+        /// Simulation time of the failing step.
+        sim_time_s: f64,
+        /// The task's error.
+        #[source]
+        source: TaskError,
+    },
+}
+
+/// An error a task's step reports; the process exits with it.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct TaskError(pub String);
+
+impl TaskError {
+    /// Wraps any displayable error.
+    pub fn from_display(e: impl std::fmt::Display) -> Self {
+        TaskError(e.to_string())
+    }
+}
+
+impl From<RuntimeError> for TaskError {
+    fn from(e: RuntimeError) -> Self {
+        TaskError(e.to_string())
+    }
+}
+
+/// What a step knows about time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StepContext {
+    /// Simulation time at the start of this step, ns.
+    pub sim_time_ns: u64,
+    /// Lockstep tick number (realtime: the wake-up count).
+    pub tick: u64,
+    /// Monotonic wall time of the wake-up, ns.
+    pub wake_mono_ns: u64,
+    /// Time since this process's previous step, ns (0 on the first).
+    pub since_last_ns: u64,
+    /// True on the last lockstep tick.
+    pub last: bool,
+    /// The run's mode.
+    pub mode: Mode,
+}
+
+impl StepContext {
+    /// Simulation time in seconds.
+    pub fn sim_time_s(&self) -> f64 {
+        self.sim_time_ns as f64 * 1e-9
+    }
+}
+
+/// A service's work: one call per wake-up.
+pub trait Task {
+    /// Do one step: read inputs (samples stamped before `ctx.sim_time_ns`),
+    /// publish outputs stamped with `ctx.sim_time_ns`.
+    fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError>;
+    /// Called once when the run ends (SIGTERM/SIGINT): flush, finish files.
+    fn finish(&mut self) -> Result<(), TaskError> {
+        Ok(())
+    }
+}
+
+/// What a finished run loop reports.
+#[derive(Debug, Clone, Default)]
+pub struct RunReport {
+    /// Steps taken.
+    pub steps: u64,
+    /// Realtime wake-ups later than one period.
+    pub deadline_misses: u64,
+}
+
+/// Monotonic clock, ns (`CLOCK_MONOTONIC`, shared by every process).
+pub fn mono_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes into the timespec we own; CLOCK_MONOTONIC always exists on Linux.
+    #[allow(unsafe_code)]
+    unsafe {
+        libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts);
+    }
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+/// Sets up `tracing` for a process: compact lines on stderr, `RUST_LOG` filter
+/// (default `info`), one span field set per process.
+pub fn init_tracing() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .compact()
+        .try_init();
+}
+
+/// One process's connection to its run: the node and the clock ports.
+pub struct Runtime {
+    node: Node<ipc::Service>,
+    args: RunArgs,
+}
+
+impl Runtime {
+    /// Creates the node `<vehicle>/<process>` in the run's domain.
+    pub fn new(args: &RunArgs) -> Result<Self, RuntimeError> {
+        let config = iceoryx_config(&args.run_id);
+        let name = format!("{}/{}", args.vehicle, args.process);
+        let node_name = NodeName::new(&name).map_err(|e| RuntimeError::Node {
+            name: name.clone(),
+            reason: format!("{e:?}"),
+        })?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .config(&config)
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<ipc::Service>()
+            .map_err(|e| RuntimeError::Node {
+                name,
+                reason: format!("{e:?}"),
+            })?;
+        Ok(Self {
+            node,
+            args: args.clone(),
+        })
+    }
+
+    /// The iceoryx2 node (for opening extra services).
+    pub fn node(&self) -> &Node<ipc::Service> {
+        &self.node
+    }
+
+    /// The arguments this process was started with.
+    pub fn args(&self) -> &RunArgs {
+        &self.args
+    }
+
+    /// Opens (or creates) a publisher on `service` with the given limits.
+    pub fn publisher<T: ipc_types::Sample>(
+        &self,
+        service: &str,
+        limits: &ChannelLimits,
+    ) -> Result<Publisher<T>, RuntimeError> {
+        Publisher::open(&self.node, service, limits)
+    }
+
+    /// Opens (or creates) a subscriber on `service` with the given limits.
+    pub fn subscriber<T: ipc_types::Sample>(
+        &self,
+        service: &str,
+        limits: &ChannelLimits,
+        buffer: usize,
+    ) -> Result<Subscriber<T>, RuntimeError> {
+        Subscriber::open(&self.node, service, limits, buffer, self.args.mode)
+    }
+
+    /// Runs `task` until SIGINT/SIGTERM, in the mode of the run.
+    pub fn run<T: Task>(self, task: T) -> Result<RunReport, RuntimeError> {
+        match self.args.mode {
+            Mode::Lockstep => self.run_lockstep(task),
+            Mode::Realtime => self.run_realtime(task),
+        }
+    }
+
+    fn done_notifier(&self) -> Result<iceoryx2::port::notifier::Notifier<ipc::Service>, RuntimeError> {
+        let name = ipc_types::run_service_name(&self.args.run_id, RunChannel::Done);
+        let limits = ChannelLimits::done(self.args.processes);
+        let service = self
+            .node
+            .service_builder(&service_name(&name)?)
+            .event()
+            .max_notifiers(limits.max_publishers)
+            .max_listeners(limits.max_subscribers)
+            .max_nodes(limits.max_nodes)
+            .event_id_max_value(self.args.processes.max(1))
+            .open_or_create()
+            .map_err(|e| RuntimeError::Service {
+                service: name.clone(),
+                reason: format!("{e:?}"),
+            })?;
+        service
+            .notifier_builder()
+            .default_event_id(EventId::new(self.args.index))
+            .create()
+            .map_err(|e| RuntimeError::Port {
+                service: name,
+                reason: format!("{e:?}"),
+            })
+    }
+
+    fn run_lockstep<T: Task>(self, mut task: T) -> Result<RunReport, RuntimeError> {
+        let wake_name =
+            ipc_types::wake_service_name(&self.args.run_id, &self.args.vehicle, &self.args.process);
+        let wake_service = self
+            .node
+            .service_builder(&service_name(&wake_name)?)
+            .event()
+            .max_notifiers(2)
+            .max_listeners(2)
+            .max_nodes(4)
+            .open_or_create()
+            .map_err(|e| RuntimeError::Service {
+                service: wake_name.clone(),
+                reason: format!("{e:?}"),
+            })?;
+        let wake = wake_service
+            .listener_builder()
+            .create()
+            .map_err(|e| RuntimeError::Port {
+                service: wake_name.clone(),
+                reason: format!("{e:?}"),
+            })?;
+        let clock_name = ipc_types::run_service_name(&self.args.run_id, RunChannel::Clock);
+        let clock_limits = ChannelLimits::clock(self.args.processes);
+        let clock: Subscriber<Clock> = Subscriber::open(
+            &self.node,
+            &clock_name,
+            &clock_limits,
+            2,
+            Mode::Realtime, // the clock itself is never held back
+        )?;
+        let done = self.done_notifier()?;
+        // Ready: every port of this process exists, so the first tick's samples reach it.
+        done.notify().map_err(|e| RuntimeError::Io {
+            service: "done".into(),
+            reason: format!("{e:?}"),
+        })?;
+
+        let waitset = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<ipc::Service>()
+            .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
+        let guard = waitset
+            .attach_notification(&wake)
+            .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
+        let mut report = RunReport::default();
+        let mut last_sim: Option<u64> = None;
+        let mut failure: Option<RuntimeError> = None;
+        let mut clock = clock;
+        let mut latest_clock: Option<Clock> = None;
+        let on_event = |id: WaitSetAttachmentId<ipc::Service>| {
+            if !id.has_event_from(&guard) {
+                return CallbackProgression::Continue;
+            }
+            let mut woken = false;
+            let _ = wake.try_wait(|_| woken = true);
+            if !woken {
+                return CallbackProgression::Continue;
+            }
+            match clock.drain_latest() {
+                Ok(Some(c)) => latest_clock = Some(c),
+                Ok(None) => {}
+                Err(e) => {
+                    failure = Some(e);
+                    return CallbackProgression::Stop;
+                }
+            }
+            let Some(c) = latest_clock else {
+                return CallbackProgression::Continue;
+            };
+            let sim = c.header.sim_time_ns;
+            let ctx = StepContext {
+                sim_time_ns: sim,
+                tick: c.tick,
+                wake_mono_ns: mono_ns(),
+                since_last_ns: last_sim.map_or(0, |l| sim.saturating_sub(l)),
+                last: c.last != 0,
+                mode: Mode::Lockstep,
+            };
+            last_sim = Some(sim);
+            if let Err(source) = task.step(&ctx) {
+                failure = Some(RuntimeError::Task {
+                    sim_time_s: ctx.sim_time_s(),
+                    source,
+                });
+                return CallbackProgression::Stop;
+            }
+            report.steps += 1;
+            if let Err(e) = done.notify() {
+                failure = Some(RuntimeError::Io {
+                    service: "done".into(),
+                    reason: format!("{e:?}"),
+                });
+                return CallbackProgression::Stop;
+            }
+            CallbackProgression::Continue
+        };
+        let result = waitset.wait_and_process(on_event);
+        let finish = task.finish();
+        if let Some(e) = failure {
+            return Err(e);
+        }
+        result.map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
+        finish.map_err(|source| RuntimeError::Task {
+            sim_time_s: last_sim.unwrap_or(0) as f64 * 1e-9,
+            source,
+        })?;
+        Ok(report)
+    }
+
+    fn run_realtime<T: Task>(self, mut task: T) -> Result<RunReport, RuntimeError> {
+        let period = Duration::from_secs_f64(self.args.period_s.max(1e-4));
+        let period_ns = period.as_nanos() as u64;
+        let epoch = if self.args.epoch_mono_ns == 0 {
+            mono_ns()
+        } else {
+            self.args.epoch_mono_ns
+        };
+        let waitset = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<ipc::Service>()
+            .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
+        let guard = waitset
+            .attach_interval(period)
+            .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
+        let mut report = RunReport::default();
+        let mut failure: Option<RuntimeError> = None;
+        let mut last_wake: Option<u64> = None;
+        let mut tick = 0u64;
+        let on_event = |id: WaitSetAttachmentId<ipc::Service>| {
+            if !id.has_event_from(&guard) {
+                return CallbackProgression::Continue;
+            }
+            let now = mono_ns();
+            if now < epoch {
+                return CallbackProgression::Continue;
+            }
+            if let Some(prev) = last_wake {
+                if now.saturating_sub(prev) > 2 * period_ns {
+                    report.deadline_misses += 1;
+                }
+            }
+            let ctx = StepContext {
+                sim_time_ns: now - epoch,
+                tick,
+                wake_mono_ns: now,
+                since_last_ns: last_wake.map_or(0, |l| now.saturating_sub(l)),
+                last: false,
+                mode: Mode::Realtime,
+            };
+            last_wake = Some(now);
+            tick += 1;
+            if let Err(source) = task.step(&ctx) {
+                failure = Some(RuntimeError::Task {
+                    sim_time_s: ctx.sim_time_s(),
+                    source,
+                });
+                return CallbackProgression::Stop;
+            }
+            report.steps += 1;
+            CallbackProgression::Continue
+        };
+        let result = waitset.wait_and_process(on_event);
+        let finish = task.finish();
+        if let Some(e) = failure {
+            return Err(e);
+        }
+        result.map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
+        finish.map_err(|source| RuntimeError::Task {
+            sim_time_s: 0.0,
+            source,
+        })?;
+        Ok(report)
+    }
+}
+
+pub(crate) fn service_name(name: &str) -> Result<ServiceName, RuntimeError> {
+    ServiceName::new(name).map_err(|e| RuntimeError::Service {
+        service: name.to_string(),
+        reason: format!("{e:?}"),
+    })
+}

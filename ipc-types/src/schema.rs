@@ -1,0 +1,201 @@
+//! Self-description of sample types, so that the recorder can write a ros2msg
+//! schema generated from the `#[repr(C)]` type itself, never by hand.
+//!
+//! A `#[repr(C)]`, `Pod` struct whose every pad byte is an explicit field has
+//! the same byte layout as its XCDR1 little-endian encoding: each primitive is
+//! aligned to its own size in both, fixed-size arrays carry no length prefix,
+//! and there is no implicit padding. So a sample is written to MCAP as the
+//! 4-byte CDR header `00 01 00 00` followed by its raw bytes, with the schema
+//! generated here listing the same fields in the same order.
+
+use std::fmt::Write as _;
+
+/// How one field's type is described in ros2msg.
+#[derive(Debug, Clone)]
+pub enum TypeDesc {
+    /// A primitive (`float64`, `uint8`, ...) with its size in bytes.
+    Primitive {
+        /// ros2msg name of the primitive.
+        ros: &'static str,
+        /// Size (and CDR alignment) in bytes.
+        size: usize,
+    },
+    /// A nested message type.
+    Nested {
+        /// ros2msg name, `shoal/Name`.
+        ros: &'static str,
+        /// The nested type's fields.
+        fields: fn() -> Vec<FieldDesc>,
+    },
+    /// A fixed-size array (ros2msg `T[N]`).
+    Array {
+        /// Element type (never itself an array: ros2msg has no nested arrays).
+        elem: Box<TypeDesc>,
+        /// Number of elements.
+        len: usize,
+    },
+}
+
+/// One field of a described struct.
+#[derive(Debug, Clone)]
+pub struct FieldDesc {
+    /// The ros2msg field name (a Rust `_pad0` becomes `pad0`).
+    pub name: String,
+    /// The field's type.
+    pub ty: TypeDesc,
+}
+
+/// A type that can describe itself as a ros2msg field type.
+pub trait FieldType {
+    /// The description of this type.
+    fn describe() -> TypeDesc;
+}
+
+/// A struct that describes its fields (every sample type and nested type).
+pub trait Described {
+    /// ros2msg type name, `shoal/Name`.
+    const ROS_NAME: &'static str;
+    /// The fields in declaration order.
+    fn fields() -> Vec<FieldDesc>;
+}
+
+macro_rules! primitive {
+    ($($t:ty => $ros:literal),* $(,)?) => {
+        $(impl FieldType for $t {
+            fn describe() -> TypeDesc {
+                TypeDesc::Primitive { ros: $ros, size: std::mem::size_of::<$t>() }
+            }
+        })*
+    };
+}
+primitive!(f64 => "float64", f32 => "float32", u64 => "uint64", i64 => "int64",
+    u32 => "uint32", i32 => "int32", u16 => "uint16", i16 => "int16", u8 => "uint8", i8 => "int8");
+
+impl<T: FieldType, const N: usize> FieldType for [T; N] {
+    fn describe() -> TypeDesc {
+        TypeDesc::Array {
+            elem: Box::new(T::describe()),
+            len: N,
+        }
+    }
+}
+
+/// The ros2msg field name for a Rust field name: leading underscores dropped.
+pub fn ros_field_name(rust: &str) -> String {
+    rust.trim_start_matches('_').to_string()
+}
+
+/// Why a generated schema is not valid ros2msg.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SchemaError {
+    /// A field name does not match `[a-z][a-z0-9_]*`, or has `__` or a trailing `_`.
+    #[error("field `{field}` of `{ty}` is not a valid ros2msg name")]
+    BadFieldName {
+        /// The type holding the field.
+        ty: String,
+        /// The offending name.
+        field: String,
+    },
+    /// ros2msg has no arrays of arrays.
+    #[error("field `{field}` of `{ty}` is an array of arrays")]
+    NestedArray {
+        /// The type holding the field.
+        ty: String,
+        /// The offending field.
+        field: String,
+    },
+}
+
+fn valid_field_name(name: &str) -> bool {
+    let mut chars = name.chars();
+    matches!(chars.next(), Some('a'..='z'))
+        && name
+            .chars()
+            .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+        && !name.contains("__")
+        && !name.ends_with('_')
+}
+
+fn type_line(ty: &TypeDesc) -> String {
+    match ty {
+        TypeDesc::Primitive { ros, .. } | TypeDesc::Nested { ros, .. } => (*ros).to_string(),
+        TypeDesc::Array { elem, len } => format!("{}[{len}]", type_line(elem)),
+    }
+}
+
+fn collect_nested(
+    owner: &str,
+    fields: &[FieldDesc],
+    out: &mut Vec<(&'static str, Vec<FieldDesc>)>,
+) -> Result<(), SchemaError> {
+    for f in fields {
+        if !valid_field_name(&f.name) {
+            return Err(SchemaError::BadFieldName {
+                ty: owner.to_string(),
+                field: f.name.clone(),
+            });
+        }
+        let inner = match &f.ty {
+            TypeDesc::Array { elem, .. } => {
+                if matches!(**elem, TypeDesc::Array { .. }) {
+                    return Err(SchemaError::NestedArray {
+                        ty: owner.to_string(),
+                        field: f.name.clone(),
+                    });
+                }
+                elem.as_ref()
+            }
+            other => other,
+        };
+        if let TypeDesc::Nested { ros, fields } = inner {
+            if !out.iter().any(|(n, _)| n == ros) {
+                let nested = fields();
+                out.push((ros, nested.clone()));
+                collect_nested(ros, &nested, out)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The ros2msg schema text of `T`: its fields, then one `MSG:` section per
+/// nested type, as the official MCAP ROS 2 readers expect.
+pub fn ros2msg_schema<T: Described>() -> Result<String, SchemaError> {
+    let fields = T::fields();
+    let mut nested = Vec::new();
+    collect_nested(T::ROS_NAME, &fields, &mut nested)?;
+    let mut text = String::new();
+    for f in &fields {
+        let _ = writeln!(text, "{} {}", type_line(&f.ty), f.name);
+    }
+    for (name, fields) in nested {
+        text.push_str(
+            "================================================================================\n",
+        );
+        let _ = writeln!(text, "MSG: {name}");
+        for f in &fields {
+            let _ = writeln!(text, "{} {}", type_line(&f.ty), f.name);
+        }
+    }
+    Ok(text)
+}
+
+/// The size in bytes the described layout occupies when packed in CDR with
+/// natural alignment, starting at an 8-aligned offset. Tests compare this with
+/// `size_of::<T>()` to prove that no implicit padding exists.
+pub fn cdr_size<T: Described>() -> usize {
+    fn walk(fields: &[FieldDesc], mut off: usize) -> usize {
+        for f in fields {
+            off = walk_ty(&f.ty, off);
+        }
+        off
+    }
+    fn walk_ty(ty: &TypeDesc, off: usize) -> usize {
+        match ty {
+            TypeDesc::Primitive { size, .. } => off.next_multiple_of(*size) + size,
+            TypeDesc::Nested { fields, .. } => walk(&fields(), off),
+            TypeDesc::Array { elem, len } => (0..*len).fold(off, |o, _| walk_ty(elem, o)),
+        }
+    }
+    walk(&T::fields(), 0)
+}

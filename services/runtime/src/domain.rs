@@ -1,0 +1,151 @@
+//! A run's iceoryx2 domain: its own file prefix and root directory, the
+//! limits of each of its services, and the removal of everything it left.
+//!
+//! Two runs on one machine never see each other: each has its own prefix
+//! (`shoal_<run-id>_`) for the shared-memory files in `/dev/shm` and its own
+//! root directory `/tmp/shoal/<run-id>/` for node and service files, and
+//! every service name contains the run id.
+
+use std::path::{Path, PathBuf};
+
+use iceoryx2::config::Config;
+use iceoryx2::prelude::{FileName, SemanticString};
+use iceoryx2_bb_system_types::path::Path as IoxPath;
+
+/// Where a run's iceoryx2 files live (besides `/dev/shm`).
+pub fn domain_root(run_id: &str) -> PathBuf {
+    PathBuf::from(format!("/tmp/shoal/{run_id}/"))
+}
+
+/// The shared-memory file prefix of a run.
+pub fn domain_prefix(run_id: &str) -> String {
+    format!("shoal_{run_id}_")
+}
+
+/// The iceoryx2 configuration of a run's domain.
+pub fn iceoryx_config(run_id: &str) -> Config {
+    let mut config = Config::default();
+    if let Ok(prefix) = FileName::new(domain_prefix(run_id).as_bytes()) {
+        config.global.prefix = prefix;
+    }
+    if let Ok(root) = IoxPath::new(domain_root(run_id).to_string_lossy().as_bytes()) {
+        config.global.set_root_path(&root);
+    }
+    config
+}
+
+/// Every file the run's domain holds right now: shared memory in `/dev/shm`
+/// with the run's prefix, and everything below its root directory.
+pub fn list_domain_files(run_id: &str) -> Vec<PathBuf> {
+    let prefix = domain_prefix(run_id);
+    let mut out = Vec::new();
+    if let Ok(entries) = std::fs::read_dir("/dev/shm") {
+        for e in entries.flatten() {
+            if e.file_name().to_string_lossy().starts_with(&prefix) {
+                out.push(e.path());
+            }
+        }
+    }
+    walk(&domain_root(run_id), &mut out);
+    out
+}
+
+fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else {
+                out.push(p);
+            }
+        }
+    }
+}
+
+/// Removes every file of the run's domain. Call it only when no process of
+/// the run is alive. Returns how many files were removed.
+pub fn cleanup_domain(run_id: &str) -> usize {
+    let files = list_domain_files(run_id);
+    let mut removed = 0;
+    for f in &files {
+        if std::fs::remove_file(f).is_ok() {
+            removed += 1;
+        }
+    }
+    let _ = std::fs::remove_dir_all(domain_root(run_id));
+    removed
+}
+
+/// Limits of one iceoryx2 service. Every process that opens a service must
+/// ask for the same limits, so they are computed here from the run's size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChannelLimits {
+    /// Most publishers (notifiers for events).
+    pub max_publishers: usize,
+    /// Most subscribers (listeners for events).
+    pub max_subscribers: usize,
+    /// Most nodes that may open the service.
+    pub max_nodes: usize,
+    /// Largest subscriber buffer.
+    pub max_buffer: usize,
+    /// Samples kept for late joiners.
+    pub history: usize,
+}
+
+/// Subscribers reserved on every service for outside clients (a Python
+/// reader, `shoal replay`, tests).
+pub const SPARE_SUBSCRIBERS: usize = 4;
+
+/// Subscriber buffer of the recorder: it drains once per lockstep frame or
+/// realtime wake-up, so it must hold everything a publisher sends meanwhile.
+pub const RECORDER_BUFFER: usize = 16;
+
+impl ChannelLimits {
+    /// A per-vehicle channel: one publisher, a handful of readers, the recorder.
+    pub fn vehicle() -> Self {
+        let subs = 4 + 1 + SPARE_SUBSCRIBERS;
+        Self {
+            max_publishers: 2,
+            max_subscribers: subs,
+            max_nodes: subs + 2,
+            max_buffer: RECORDER_BUFFER,
+            history: 1,
+        }
+    }
+
+    /// The world snapshot: read by every camera and sonar, and the recorder.
+    pub fn world(vehicles: usize) -> Self {
+        let subs = 2 * vehicles + 1 + SPARE_SUBSCRIBERS;
+        Self {
+            max_publishers: 2,
+            max_subscribers: subs,
+            max_nodes: subs + 2,
+            max_buffer: 4,
+            history: 1,
+        }
+    }
+
+    /// The lockstep clock: read by every process.
+    pub fn clock(processes: usize) -> Self {
+        let subs = processes + SPARE_SUBSCRIBERS;
+        Self {
+            max_publishers: 1,
+            max_subscribers: subs,
+            max_nodes: subs + 1,
+            max_buffer: 2,
+            history: 1,
+        }
+    }
+
+    /// The `done` event: one notifier per process, the orchestrator listens.
+    pub fn done(processes: usize) -> Self {
+        Self {
+            max_publishers: processes + 1,
+            max_subscribers: 2,
+            max_nodes: processes + 2,
+            max_buffer: 1,
+            history: 0,
+        }
+    }
+}

@@ -1,0 +1,267 @@
+//! Typed ports: publishers that stamp the common header and refuse
+//! non-finite samples, subscribers that hold back samples of the current
+//! lockstep tick, count losses and rejected samples, and time every hop.
+
+use std::collections::VecDeque;
+
+use iceoryx2::port::publisher::Publisher as IoxPublisher;
+use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
+use iceoryx2::prelude::*;
+use ipc_types::{Header, Sample};
+
+use crate::domain::ChannelLimits;
+use crate::latency::LatencyRecorder;
+use crate::{mono_ns, service_name, Mode, RuntimeError, StepContext};
+
+/// Where a sample's causal chain started: the sensor event it descends from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Origin {
+    /// Monotonic wall time of the sensor event, ns.
+    pub mono_ns: u64,
+    /// Simulation time of the sensor event, ns.
+    pub sim_time_ns: u64,
+}
+
+impl Origin {
+    /// A new sensor event: now, at this step's simulation time.
+    pub fn here(ctx: &StepContext) -> Self {
+        Self {
+            mono_ns: mono_ns(),
+            sim_time_ns: ctx.sim_time_ns,
+        }
+    }
+    /// The origin recorded in an input's header.
+    pub fn of(header: &Header) -> Self {
+        Self {
+            mono_ns: header.origin_mono_ns,
+            sim_time_ns: header.origin_sim_time_ns,
+        }
+    }
+    /// The older of two origins (the chain's first sensor event); a zero origin is ignored.
+    pub fn earliest(self, other: Origin) -> Origin {
+        match (self.mono_ns, other.mono_ns) {
+            (0, _) => other,
+            (_, 0) => self,
+            (a, b) if b < a => other,
+            _ => self,
+        }
+    }
+}
+
+fn open_pubsub<T: Sample>(
+    node: &Node<ipc::Service>,
+    service: &str,
+    limits: &ChannelLimits,
+) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>, RuntimeError>
+{
+    node.service_builder(&service_name(service)?)
+        .publish_subscribe::<T>()
+        .max_publishers(limits.max_publishers)
+        .max_subscribers(limits.max_subscribers)
+        .max_nodes(limits.max_nodes)
+        .subscriber_max_buffer_size(limits.max_buffer)
+        .history_size(limits.history)
+        .subscriber_max_borrowed_samples(2)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| RuntimeError::Service {
+            service: service.to_string(),
+            reason: format!("{e:?}"),
+        })
+}
+
+/// A publisher of one sample type on one service.
+pub struct Publisher<T: Sample> {
+    inner: IoxPublisher<ipc::Service, T, ()>,
+    service: String,
+    seq: u64,
+}
+
+impl<T: Sample> Publisher<T> {
+    pub(crate) fn open(
+        node: &Node<ipc::Service>,
+        service: &str,
+        limits: &ChannelLimits,
+    ) -> Result<Self, RuntimeError> {
+        let factory = open_pubsub::<T>(node, service, limits)?;
+        let inner = factory
+            .publisher_builder()
+            .max_loaned_samples(2)
+            .create()
+            .map_err(|e| RuntimeError::Port {
+                service: service.to_string(),
+                reason: format!("{e:?}"),
+            })?;
+        Ok(Self {
+            inner,
+            service: service.to_string(),
+            seq: 0,
+        })
+    }
+
+    /// The service name.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+
+    /// Stamps the header (sequence, this step's simulation time, publish
+    /// time, origin) and sends. A sample with a non-finite value is refused
+    /// with an error and never sent.
+    pub fn publish(
+        &mut self,
+        mut sample: T,
+        ctx: &StepContext,
+        origin: Origin,
+    ) -> Result<(), RuntimeError> {
+        if !sample.is_finite() {
+            return Err(RuntimeError::Io {
+                service: self.service.clone(),
+                reason: "refused to publish a sample with a non-finite value".into(),
+            });
+        }
+        let h = sample.header_mut();
+        h.seq = self.seq;
+        h.sim_time_ns = ctx.sim_time_ns;
+        h.origin_mono_ns = origin.mono_ns;
+        h.origin_sim_time_ns = origin.sim_time_ns;
+        h.publish_mono_ns = mono_ns();
+        self.publish_stamped(sample)
+    }
+
+    /// Sends a sample whose header is already complete (replay, the clock).
+    pub fn publish_stamped(&mut self, sample: T) -> Result<(), RuntimeError> {
+        self.inner
+            .send_copy(sample)
+            .map_err(|e| RuntimeError::Io {
+                service: self.service.clone(),
+                reason: format!("{e:?}"),
+            })?;
+        self.seq += 1;
+        Ok(())
+    }
+}
+
+/// A subscriber of one sample type on one service.
+pub struct Subscriber<T: Sample> {
+    inner: IoxSubscriber<ipc::Service, T, ()>,
+    service: String,
+    mode: Mode,
+    held: VecDeque<T>,
+    next_seq: Option<u64>,
+    lost: u64,
+    rejected: u64,
+    latency: LatencyRecorder,
+}
+
+impl<T: Sample> Subscriber<T> {
+    pub(crate) fn open(
+        node: &Node<ipc::Service>,
+        service: &str,
+        limits: &ChannelLimits,
+        buffer: usize,
+        mode: Mode,
+    ) -> Result<Self, RuntimeError> {
+        let factory = open_pubsub::<T>(node, service, limits)?;
+        let inner = factory
+            .subscriber_builder()
+            .buffer_size(buffer.clamp(1, limits.max_buffer))
+            .create()
+            .map_err(|e| RuntimeError::Port {
+                service: service.to_string(),
+                reason: format!("{e:?}"),
+            })?;
+        Ok(Self {
+            inner,
+            service: service.to_string(),
+            mode,
+            held: VecDeque::with_capacity(2 * limits.max_buffer),
+            next_seq: None,
+            lost: 0,
+            rejected: 0,
+            latency: LatencyRecorder::new(),
+        })
+    }
+
+    /// The service name.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+
+    /// Samples that never arrived (gaps in the publisher's sequence).
+    pub fn lost(&self) -> u64 {
+        self.lost
+    }
+
+    /// Samples refused because they held a non-finite value.
+    pub fn rejected(&self) -> u64 {
+        self.rejected
+    }
+
+    /// Publish → take latency of every sample received so far.
+    pub fn latency(&self) -> &LatencyRecorder {
+        &self.latency
+    }
+
+    fn pull(&mut self) -> Result<(), RuntimeError> {
+        loop {
+            let received = self.inner.receive().map_err(|e| RuntimeError::Io {
+                service: self.service.clone(),
+                reason: format!("{e:?}"),
+            })?;
+            let Some(sample) = received else {
+                return Ok(());
+            };
+            let value: T = *sample;
+            drop(sample);
+            let h = *value.header();
+            self.latency
+                .record_ns(mono_ns().saturating_sub(h.publish_mono_ns));
+            match self.next_seq {
+                Some(n) if h.seq > n => self.lost += h.seq - n,
+                _ => {}
+            }
+            self.next_seq = Some(h.seq + 1);
+            if !value.is_finite() {
+                self.rejected += 1;
+                tracing::warn!(service = %self.service, seq = h.seq, "rejected a sample with a non-finite value");
+                continue;
+            }
+            self.held.push_back(value);
+        }
+    }
+
+    fn ready(&self, ctx: &StepContext, s: &T) -> bool {
+        self.mode == Mode::Realtime || s.header().sim_time_ns < ctx.sim_time_ns
+    }
+
+    /// Every sample that is ready at this step, oldest first. In lockstep, a
+    /// sample is ready when it was stamped before this step's tick; later
+    /// ones stay held for the next step.
+    pub fn take_ready(&mut self, ctx: &StepContext, mut f: impl FnMut(T)) -> Result<(), RuntimeError> {
+        self.pull()?;
+        while let Some(front) = self.held.front() {
+            if !self.ready(ctx, front) {
+                break;
+            }
+            if let Some(v) = self.held.pop_front() {
+                f(v);
+            }
+        }
+        Ok(())
+    }
+
+    /// The newest ready sample, if any arrived since the last call.
+    pub fn latest(&mut self, ctx: &StepContext) -> Result<Option<T>, RuntimeError> {
+        let mut last = None;
+        self.take_ready(ctx, |v| last = Some(v))?;
+        Ok(last)
+    }
+
+    /// The newest sample regardless of its stamp (the clock).
+    pub fn drain_latest(&mut self) -> Result<Option<T>, RuntimeError> {
+        self.pull()?;
+        let last = self.held.back().copied();
+        self.held.clear();
+        Ok(last)
+    }
+}
