@@ -1,0 +1,609 @@
+//! The parent's pose from beacon pixels: PnP (eq. 2), then eqs. (3) and (1).
+//!
+//! # Method
+//!
+//! Eq. (2) of the paper binds each beacon's pixel `P_i` to the parent's pose
+//! in the camera frame, `X_Bi^C = R_L^C B_i + X_L^C`, `P_i = π(X_Bi^C)` with
+//! `π` the pinhole projection. The pose minimises the sum of squared
+//! reprojection errors `Σ |π(R B_i + t) − P_i|²` (the maximum-likelihood
+//! estimate under Gaussian pixel noise), found numerically as the paper says:
+//!
+//! 1. **Global start — exhaustive P3P.** The three visible beacons that span
+//!    the largest triangle in the image give, by Grunert's elimination, a
+//!    quartic whose real roots are all the poses (up to four) that fit those
+//!    three exactly. The quartic is derived in [`p3p`]; its roots are found by
+//!    a bracketing solver that cannot lose a root to cancellation.
+//! 2. **Refinement — Levenberg–Marquardt** on the reprojection error of
+//!    *every* visible beacon, from each P3P pose and from the previous
+//!    estimate (warm start). The parameters are the translation `t` and a
+//!    rotation vector `ω` applied on the left, `R ← exp([ω]×) R`; Marquardt's
+//!    diagonal scaling and Nielsen's damping update.
+//! 3. **Choice.** The converged fit with the lowest cost wins, except that
+//!    fits whose costs differ by less than `ambiguity_chi2 · σ²` cannot be
+//!    told apart by the pixels: among those, the one nearest the previous
+//!    estimate is taken. This is how the mirrored / flipped solution is
+//!    rejected. With exactly three beacons every P3P pose fits exactly, so
+//!    without a previous estimate more than one candidate means invalid.
+//!
+//! The covariance of `[position, rotation vector]` is `(JᵀJ)⁻¹ σ²` at the
+//! solution (Gauss–Newton approximation), `σ = max(camera.noise_px,
+//! pose.pixel_sigma_floor_px)`, rotated into the follower body frame.
+
+use nalgebra::{
+    Isometry3, Matrix3, Matrix6, Point3, Rotation3, Translation3, UnitQuaternion, Vector3, Vector6,
+};
+
+use crate::poly::{real_roots, MAX_ROOTS};
+use crate::{BeaconLayout, BeaconObservation, CameraConfig, CameraError, PoseConfig, MAX_BEACONS};
+
+/// Most starts refined per call: four P3P poses and the previous estimate.
+const MAX_STARTS: usize = MAX_ROOTS + 1;
+
+/// The parent's pose as the follower's camera measured it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseEstimate {
+    /// True if the fit is trustworthy: enough beacons, converged, reprojection
+    /// error under the limit, unambiguous. When false, the pose fields are the
+    /// identity / zero (never a guess) and `covariance` is zero; `beacons_used`,
+    /// `reprojection_rms_px` and `iterations` still describe the attempt.
+    pub valid: bool,
+    /// Eq. (2): the parent's body frame in the camera frame, `T_L^C`
+    /// (parent body → camera), i.e. `R_L^C` and `X_L^C`.
+    pub parent_in_camera: Isometry3<f64>,
+    /// Eq. (3): the parent in the follower body frame, `T_L^F` (parent body →
+    /// follower body): `X_L^F = R_C^F X_L^C + X_C^F`, `R_L^F = R_C^F R_L^C`.
+    pub parent_in_body: Isometry3<f64>,
+    /// Eq. (1): the follower's position in the parent's body frame,
+    /// `X_F^L = −(R_L^F)ᵀ X_L^F`, m.
+    pub follower_in_parent_m: Vector3<f64>,
+    /// Visible beacons the fit used.
+    pub beacons_used: usize,
+    /// Root-mean-square reprojection error over the used beacons' pixel
+    /// coordinates (`sqrt(Σ|r_i|² / n)` with `r_i` the 2-D residual), px.
+    pub reprojection_rms_px: f64,
+    /// Covariance of `[position (m), rotation vector (rad)]` of the parent in
+    /// the follower body frame, from `(JᵀJ)⁻¹σ²`. The rotation vector `δθ`
+    /// perturbs on the left: `R_L^F ← exp([δθ]×) R_L^F`.
+    pub covariance: Matrix6<f64>,
+    /// Levenberg–Marquardt iterations of the chosen fit.
+    pub iterations: u32,
+}
+
+impl PoseEstimate {
+    fn invalid(beacons_used: usize, rms: f64, iterations: u32) -> Self {
+        Self {
+            valid: false,
+            parent_in_camera: Isometry3::identity(),
+            parent_in_body: Isometry3::identity(),
+            follower_in_parent_m: Vector3::zeros(),
+            beacons_used,
+            reprojection_rms_px: if rms.is_finite() { rms } else { 0.0 },
+            covariance: Matrix6::zeros(),
+            iterations,
+        }
+    }
+}
+
+/// Eq. (3): `T_L^F = T_C^F · T_L^C`, i.e. `X_L^F = R_C^F X_L^C + X_C^F` and
+/// `R_L^F = R_C^F R_L^C`.
+pub fn parent_in_body(
+    camera_in_body: &Isometry3<f64>,
+    parent_in_camera: &Isometry3<f64>,
+) -> Isometry3<f64> {
+    let r_cf = camera_in_body.rotation;
+    let x_cf = camera_in_body.translation.vector;
+    let x_lc = parent_in_camera.translation.vector;
+    Isometry3::from_parts(
+        Translation3::from(r_cf * x_lc + x_cf),
+        r_cf * parent_in_camera.rotation,
+    )
+}
+
+/// Eq. (1): the follower's position in the parent's frame,
+/// `X_F^L = −(R_L^F)ᵀ X_L^F`, from the parent's pose in the follower's body
+/// frame.
+pub fn follower_in_parent(parent_in_body: &Isometry3<f64>) -> Vector3<f64> {
+    -(parent_in_body.rotation.inverse() * parent_in_body.translation.vector)
+}
+
+/// A pose candidate in the camera frame: `X^C = R B + t`.
+#[derive(Debug, Clone, Copy)]
+struct Fit {
+    q: UnitQuaternion<f64>,
+    t: Vector3<f64>,
+    /// Sum of squared pixel residuals, px².
+    cost: f64,
+    iterations: u32,
+    converged: bool,
+}
+
+/// Solves the parent's pose from beacon pixels (see the module docs).
+///
+/// Holds the previous valid estimate (to reject flipped solutions and to
+/// warm-start) and fixed-size scratch; `estimate` does not allocate.
+#[derive(Debug, Clone)]
+pub struct PoseEstimator {
+    cfg: PoseConfig,
+    focal_px: f64,
+    principal_px: [f64; 2],
+    camera_in_body: Isometry3<f64>,
+    sigma_px: f64,
+    layout: [Point3<f64>; MAX_BEACONS],
+    layout_count: usize,
+    previous: Option<(UnitQuaternion<f64>, Vector3<f64>)>,
+    // Scratch: the visible beacons of the current call.
+    obj: [Point3<f64>; MAX_BEACONS],
+    pix: [[f64; 2]; MAX_BEACONS],
+    n: usize,
+}
+
+impl PoseEstimator {
+    /// Validates the three configs and builds the solver.
+    pub fn new(
+        pose: &PoseConfig,
+        camera: &CameraConfig,
+        layout: &BeaconLayout,
+    ) -> Result<Self, CameraError> {
+        pose.validate()?;
+        camera.validate()?;
+        layout.validate()?;
+        if layout.positions_body_m.len() < pose.min_beacons {
+            return Err(CameraError::InvalidConfig {
+                key: "pose.min_beacons",
+                reason: format!(
+                    "must not exceed the {} beacons of the layout, got {}",
+                    layout.positions_body_m.len(),
+                    pose.min_beacons
+                ),
+            });
+        }
+        let mut pts = [Point3::origin(); MAX_BEACONS];
+        let mut count = 0;
+        for (slot, p) in pts.iter_mut().zip(layout.points()) {
+            *slot = p;
+            count += 1;
+        }
+        Ok(Self {
+            cfg: pose.clone(),
+            focal_px: camera.focal_px(),
+            principal_px: camera.principal_point_px(),
+            camera_in_body: camera.camera_in_body(),
+            sigma_px: camera.noise_px.max(pose.pixel_sigma_floor_px),
+            layout: pts,
+            layout_count: count,
+            previous: None,
+            obj: [Point3::origin(); MAX_BEACONS],
+            pix: [[0.0; 2]; MAX_BEACONS],
+            n: 0,
+        })
+    }
+
+    /// Forgets the previous estimate (after a long loss of sight, or a jump).
+    pub fn reset(&mut self) {
+        self.previous = None;
+    }
+
+    /// True if a previous valid estimate is held.
+    pub fn has_previous(&self) -> bool {
+        self.previous.is_some()
+    }
+
+    /// Estimates the parent's pose from one observation. Beacons are matched
+    /// by index with the layout; non-finite pixels are ignored.
+    pub fn estimate(&mut self, obs: &BeaconObservation) -> PoseEstimate {
+        self.n = 0;
+        let count = obs.count.min(self.layout_count);
+        for i in 0..count {
+            let [u, v] = obs.pixels[i];
+            if obs.visible[i] && u.is_finite() && v.is_finite() {
+                self.obj[self.n] = self.layout[i];
+                self.pix[self.n] = [u, v];
+                self.n += 1;
+            }
+        }
+        let n = self.n;
+        if n < self.cfg.min_beacons {
+            return PoseEstimate::invalid(n, 0.0, 0);
+        }
+
+        // Starts: P3P poses, then the previous estimate.
+        let mut starts = [(UnitQuaternion::identity(), Vector3::zeros()); MAX_STARTS];
+        let mut n_starts = self.p3p_starts(&mut starts);
+        let n_p3p = n_starts;
+        if let Some(prev) = self.previous {
+            starts[n_starts] = prev;
+            n_starts += 1;
+        }
+
+        let mut fits = [Fit {
+            q: UnitQuaternion::identity(),
+            t: Vector3::zeros(),
+            cost: f64::INFINITY,
+            iterations: 0,
+            converged: false,
+        }; MAX_STARTS];
+        let mut best: Option<usize> = None;
+        for k in 0..n_starts {
+            let (q, t) = starts[k];
+            fits[k] = self.refine(q, t);
+            let f = &fits[k];
+            if f.converged && f.cost.is_finite() && best.is_none_or(|b| f.cost < fits[b].cost) {
+                best = Some(k);
+            }
+        }
+        let Some(best) = best else {
+            let (cost, iters) = fits[..n_starts].iter().filter(|f| f.cost.is_finite()).fold(
+                (f64::INFINITY, 0),
+                |a, f| {
+                    if f.cost < a.0 {
+                        (f.cost, f.iterations)
+                    } else {
+                        a
+                    }
+                },
+            );
+            return PoseEstimate::invalid(n, (cost / n as f64).sqrt(), iters);
+        };
+
+        // Fits that the pixels cannot tell apart from the best one.
+        let margin = self.cfg.ambiguity_chi2 * self.sigma_px * self.sigma_px;
+        let best_fit = fits[best];
+        let mut chosen = best;
+        let mut n_alternatives = 0;
+        let mut nearest = f64::INFINITY;
+        for (k, f) in fits[..n_starts].iter().enumerate() {
+            if !(f.converged && f.cost <= best_fit.cost + margin) {
+                continue;
+            }
+            if k != best && pose_distance(f, &best_fit.q, &best_fit.t) > 1e-6 {
+                n_alternatives += 1;
+            }
+            if let Some((pq, pt)) = &self.previous {
+                let d = pose_distance(f, pq, pt);
+                if d < nearest {
+                    nearest = d;
+                    chosen = k;
+                }
+            }
+        }
+        // With three beacons (zero redundancy) and no history, several exact
+        // solutions are a coin toss: refuse rather than guess.
+        if self.previous.is_none() && n == 3 && n_alternatives > 0 && n_p3p > 1 {
+            return PoseEstimate::invalid(
+                n,
+                (best_fit.cost / n as f64).sqrt(),
+                best_fit.iterations,
+            );
+        }
+        let fit = fits[chosen];
+        let rms = (fit.cost / n as f64).sqrt();
+        if rms > self.cfg.max_reprojection_rms_px {
+            return PoseEstimate::invalid(n, rms, fit.iterations);
+        }
+
+        // Covariance (JᵀJ)⁻¹σ² in the camera frame, then in the body frame.
+        let Some((_, h, _)) = self.normal_equations(&fit.q, &fit.t) else {
+            return PoseEstimate::invalid(n, rms, fit.iterations);
+        };
+        let Some(chol) = h.cholesky() else {
+            return PoseEstimate::invalid(n, rms, fit.iterations);
+        };
+        let cov_cam = chol.inverse() * (self.sigma_px * self.sigma_px);
+        let r_cf = self.camera_in_body.rotation.to_rotation_matrix();
+        let mut g = Matrix6::zeros();
+        g.fixed_view_mut::<3, 3>(0, 0).copy_from(r_cf.matrix());
+        g.fixed_view_mut::<3, 3>(3, 3).copy_from(r_cf.matrix());
+        let covariance = g * cov_cam * g.transpose();
+        if !covariance.iter().all(|c| c.is_finite()) {
+            return PoseEstimate::invalid(n, rms, fit.iterations);
+        }
+
+        let parent_in_camera = Isometry3::from_parts(Translation3::from(fit.t), fit.q);
+        let in_body = parent_in_body(&self.camera_in_body, &parent_in_camera);
+        self.previous = Some((fit.q, fit.t));
+        PoseEstimate {
+            valid: true,
+            parent_in_camera,
+            parent_in_body: in_body,
+            follower_in_parent_m: follower_in_parent(&in_body),
+            beacons_used: n,
+            reprojection_rms_px: rms,
+            covariance,
+            iterations: fit.iterations,
+        }
+    }
+
+    /// P3P on the visible triple with the largest image triangle; writes up to
+    /// four poses into `out` and returns how many.
+    fn p3p_starts(&self, out: &mut [(UnitQuaternion<f64>, Vector3<f64>); MAX_STARTS]) -> usize {
+        let n = self.n;
+        let mut best = (0, 1, 2);
+        let mut best_area = -1.0;
+        for i in 0..n {
+            for j in i + 1..n {
+                for k in j + 1..n {
+                    let [ui, vi] = self.pix[i];
+                    let [uj, vj] = self.pix[j];
+                    let [uk, vk] = self.pix[k];
+                    let area = ((uj - ui) * (vk - vi) - (uk - ui) * (vj - vi)).abs();
+                    if area > best_area {
+                        best_area = area;
+                        best = (i, j, k);
+                    }
+                }
+            }
+        }
+        let (i, j, k) = best;
+        let f = [self.bearing(i), self.bearing(j), self.bearing(k)];
+        let p = [self.obj[i], self.obj[j], self.obj[k]];
+        let mut poses = [(UnitQuaternion::identity(), Vector3::zeros()); MAX_ROOTS];
+        let m = p3p(&p, &f, &mut poses);
+        out[..m].copy_from_slice(&poses[..m]);
+        m
+    }
+
+    fn bearing(&self, i: usize) -> Vector3<f64> {
+        Vector3::new(
+            (self.pix[i][0] - self.principal_px[0]) / self.focal_px,
+            (self.pix[i][1] - self.principal_px[1]) / self.focal_px,
+            1.0,
+        )
+        .normalize()
+    }
+
+    /// Sum of squared residuals, `JᵀJ` and `Jᵀr` at a pose; `None` if a
+    /// beacon is not in front of the camera.
+    fn normal_equations(
+        &self,
+        q: &UnitQuaternion<f64>,
+        t: &Vector3<f64>,
+    ) -> Option<(f64, Matrix6<f64>, Vector6<f64>)> {
+        let r: Matrix3<f64> = q.to_rotation_matrix().into_inner();
+        let f = self.focal_px;
+        let mut cost = 0.0;
+        let mut h = Matrix6::zeros();
+        let mut g = Vector6::zeros();
+        for i in 0..self.n {
+            let w = r * self.obj[i].coords; // R B
+            let x = w + t;
+            if x.z <= 1e-9 {
+                return None;
+            }
+            let iz = 1.0 / x.z;
+            let ru = self.principal_px[0] + f * x.x * iz - self.pix[i][0];
+            let rv = self.principal_px[1] + f * x.y * iz - self.pix[i][1];
+            cost += ru * ru + rv * rv;
+            // d(u, v)/dX, then d/dω = (R B) × (d/dX).
+            let au = Vector3::new(f * iz, 0.0, -f * x.x * iz * iz);
+            let av = Vector3::new(0.0, f * iz, -f * x.y * iz * iz);
+            let cu = w.cross(&au);
+            let cv = w.cross(&av);
+            let ju = Vector6::new(au.x, au.y, au.z, cu.x, cu.y, cu.z);
+            let jv = Vector6::new(av.x, av.y, av.z, cv.x, cv.y, cv.z);
+            h += ju * ju.transpose() + jv * jv.transpose();
+            g += ju * ru + jv * rv;
+        }
+        Some((cost, h, g))
+    }
+
+    fn cost(&self, q: &UnitQuaternion<f64>, t: &Vector3<f64>) -> f64 {
+        let r: Matrix3<f64> = q.to_rotation_matrix().into_inner();
+        let f = self.focal_px;
+        let mut cost = 0.0;
+        for i in 0..self.n {
+            let x = r * self.obj[i].coords + t;
+            if x.z <= 1e-9 {
+                return f64::INFINITY;
+            }
+            let iz = 1.0 / x.z;
+            let ru = self.principal_px[0] + f * x.x * iz - self.pix[i][0];
+            let rv = self.principal_px[1] + f * x.y * iz - self.pix[i][1];
+            cost += ru * ru + rv * rv;
+        }
+        cost
+    }
+
+    /// Levenberg–Marquardt on the reprojection error from `(q, t)`.
+    fn refine(&self, mut q: UnitQuaternion<f64>, mut t: Vector3<f64>) -> Fit {
+        let tol = self.cfg.convergence_tol;
+        let Some((mut cost, mut h, mut g)) = self.normal_equations(&q, &t) else {
+            return Fit {
+                q,
+                t,
+                cost: f64::INFINITY,
+                iterations: 0,
+                converged: false,
+            };
+        };
+        let mut mu = 1e-3;
+        let mut nu = 2.0;
+        let mut converged = false;
+        let mut it = 0;
+        while it < self.cfg.max_iterations {
+            it += 1;
+            if cost <= 1e-24 * self.focal_px * self.focal_px {
+                converged = true;
+                break;
+            }
+            let mut d = h.diagonal();
+            let dmax = d.max();
+            for di in d.iter_mut() {
+                *di = di.max(1e-12 * dmax + 1e-300);
+            }
+            let mut a = h;
+            for k in 0..6 {
+                a[(k, k)] += mu * d[k];
+            }
+            let Some(chol) = a.cholesky() else {
+                mu *= nu;
+                nu *= 2.0;
+                continue;
+            };
+            let step = chol.solve(&(-g));
+            let dt = Vector3::new(step[0], step[1], step[2]);
+            let dw = Vector3::new(step[3], step[4], step[5]);
+            if dt.norm() <= tol * (t.norm() + tol) && dw.norm() <= tol {
+                converged = true;
+                break;
+            }
+            let q_new = UnitQuaternion::from_scaled_axis(dw) * q;
+            let t_new = t + dt;
+            let cost_new = self.cost(&q_new, &t_new);
+            // Predicted decrease of ½‖r‖²: ½ δᵀ(μDδ − g).
+            let mut pred = 0.0;
+            for k in 0..6 {
+                pred += step[k] * (mu * d[k] * step[k] - g[k]);
+            }
+            pred *= 0.5;
+            let actual = 0.5 * (cost - cost_new);
+            if cost_new.is_finite() && actual > 0.0 {
+                let rho = if pred > 0.0 { actual / pred } else { 1.0 };
+                q = q_new;
+                t = t_new;
+                match self.normal_equations(&q, &t) {
+                    Some((c, hh, gg)) => {
+                        cost = c;
+                        h = hh;
+                        g = gg;
+                    }
+                    None => break,
+                }
+                mu *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
+                nu = 2.0;
+                if actual <= 1e-15 * 0.5 * cost {
+                    converged = true;
+                    break;
+                }
+            } else {
+                mu *= nu;
+                nu *= 2.0;
+                if !mu.is_finite() || mu > 1e16 {
+                    // No descent direction left: a (numerical) minimum.
+                    converged = true;
+                    break;
+                }
+            }
+        }
+        Fit {
+            q,
+            t,
+            cost,
+            iterations: it,
+            converged,
+        }
+    }
+}
+
+/// Distance between a fit and a pose: rotation angle (rad) plus translation
+/// difference relative to the range.
+fn pose_distance(f: &Fit, q: &UnitQuaternion<f64>, t: &Vector3<f64>) -> f64 {
+    f.q.angle_to(q) + (f.t - t).norm() / t.norm().max(1.0)
+}
+
+/// P3P by Grunert's elimination (see Haralick et al., IJCV 1994).
+///
+/// With world points `P1, P2, P3`, unit bearings `f1, f2, f3` and depths
+/// `s_i` (so `X_i = s_i f_i`), let `a = |P2−P3|`, `b = |P1−P3|`,
+/// `c = |P1−P2|`, `cα = f2·f3`, `cβ = f1·f3`, `cγ = f1·f2`, `u = s2/s1`,
+/// `v = s3/s1`. The law of cosines gives
+///
+/// ```text
+/// (A)  b²(u² + v² − 2uv cα) = a² Q(v)
+/// (C)  b²(1 + u² − 2u cγ)   = c² Q(v),      Q(v) = 1 + v² − 2v cβ = b²/s1²
+/// ```
+///
+/// (A) − (C) is linear in `u`: `u = N(v)/D(v)` with
+/// `N = (K−1)v² − 2K cβ v + 1 + K`, `K = (a²−c²)/b²`, `D = 2(cγ − v cα)`.
+/// Putting it into (C) and multiplying by `D²` gives the quartic
+/// `D²(1 − (c²/b²) Q) + N² − 2 cγ N D = 0` in `v`. Each real root with
+/// `D ≠ 0`, `u > 0`, `v > 0` gives `s1 = b/√Q(v)` and the three camera-frame
+/// points; the rotation and translation follow from the two triangles'
+/// orthonormal frames (triad), exact because P3P preserves the triangle.
+fn p3p(
+    p: &[Point3<f64>; 3],
+    f: &[Vector3<f64>; 3],
+    out: &mut [(UnitQuaternion<f64>, Vector3<f64>); MAX_ROOTS],
+) -> usize {
+    let a2 = (p[1] - p[2]).norm_squared();
+    let b2 = (p[0] - p[2]).norm_squared();
+    let c2 = (p[0] - p[1]).norm_squared();
+    if b2 <= 1e-18 {
+        return 0;
+    }
+    let ca = f[1].dot(&f[2]);
+    let cb = f[0].dot(&f[2]);
+    let cg = f[0].dot(&f[1]);
+    let k = (a2 - c2) / b2;
+    let r = c2 / b2;
+    // Polynomials in ascending powers of v.
+    let nq = [1.0 + k, -2.0 * k * cb, k - 1.0];
+    let dq = [2.0 * cg, -2.0 * ca];
+    let qq = [1.0, -2.0 * cb, 1.0];
+    let d2 = mul(&dq, &dq); // degree 2
+    let one_minus_rq = [1.0 - r * qq[0], -r * qq[1], -r * qq[2]];
+    let t1 = mul(&d2, &one_minus_rq); // degree 4
+    let t2 = mul(&nq, &nq); // degree 4
+    let t3 = mul(&nq, &dq); // degree 3
+    let mut quartic = [0.0; 5];
+    for i in 0..5 {
+        quartic[i] = t1[i] + t2[i] - if i < 4 { 2.0 * cg * t3[i] } else { 0.0 };
+    }
+    let mut roots = [0.0; MAX_ROOTS];
+    let nr = real_roots(&quartic, &mut roots);
+
+    let frame_p = match triad(&p[0].coords, &p[1].coords, &p[2].coords) {
+        Some(m) => m,
+        None => return 0,
+    };
+    let mut m = 0;
+    for &v in &roots[..nr] {
+        if v <= 0.0 {
+            continue;
+        }
+        let d = 2.0 * (cg - v * ca);
+        if d.abs() < 1e-12 {
+            continue;
+        }
+        let u = (nq[0] + nq[1] * v + nq[2] * v * v) / d;
+        let q = 1.0 + v * v - 2.0 * v * cb;
+        if u <= 0.0 || q <= 0.0 {
+            continue;
+        }
+        let s1 = (b2 / q).sqrt();
+        let x = [f[0] * s1, f[1] * (u * s1), f[2] * (v * s1)];
+        let Some(frame_x) = triad(&x[0], &x[1], &x[2]) else {
+            continue;
+        };
+        let rot = frame_x * frame_p.transpose();
+        let rot = Rotation3::from_matrix_unchecked(rot);
+        let t = x[0] - rot * p[0].coords;
+        let uq = UnitQuaternion::from_rotation_matrix(&rot);
+        if m < MAX_ROOTS && t.iter().all(|c| c.is_finite()) {
+            out[m] = (uq, t);
+            m += 1;
+        }
+    }
+    m
+}
+
+/// Orthonormal frame `[e1 e2 e3]` of a triangle: `e1` along `b − a`, `e3`
+/// normal to the triangle.
+fn triad(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> Option<Matrix3<f64>> {
+    let e1 = (b - a).try_normalize(1e-12)?;
+    let e3 = e1.cross(&(c - a)).try_normalize(1e-12)?;
+    let e2 = e3.cross(&e1);
+    Some(Matrix3::from_columns(&[e1, e2, e3]))
+}
+
+/// Product of two polynomials in ascending powers (result length 5, padded).
+fn mul(a: &[f64], b: &[f64]) -> [f64; 5] {
+    let mut out = [0.0; 5];
+    for (i, ai) in a.iter().enumerate() {
+        for (j, bj) in b.iter().enumerate() {
+            if i + j < 5 {
+                out[i + j] += ai * bj;
+            }
+        }
+    }
+    out
+}
