@@ -45,7 +45,9 @@ pub use latency::LatencyRecorder;
 pub use ports::{Publisher, Subscriber};
 
 /// How time advances in a run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
     /// The orchestrator ticks a clock and waits for every due process.
@@ -299,7 +301,9 @@ impl Runtime {
         }
     }
 
-    fn done_notifier(&self) -> Result<iceoryx2::port::notifier::Notifier<ipc::Service>, RuntimeError> {
+    fn done_notifier(
+        &self,
+    ) -> Result<iceoryx2::port::notifier::Notifier<ipc::Service>, RuntimeError> {
         let name = ipc_types::run_service_name(&self.args.run_id, RunChannel::Done);
         let limits = ChannelLimits::done(self.args.processes);
         let service = self

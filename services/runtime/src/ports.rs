@@ -52,8 +52,10 @@ fn open_pubsub<T: Sample>(
     node: &Node<ipc::Service>,
     service: &str,
     limits: &ChannelLimits,
-) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>, RuntimeError>
-{
+) -> Result<
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+    RuntimeError,
+> {
     node.service_builder(&service_name(service)?)
         .publish_subscribe::<T>()
         .max_publishers(limits.max_publishers)
@@ -130,12 +132,10 @@ impl<T: Sample> Publisher<T> {
 
     /// Sends a sample whose header is already complete (replay, the clock).
     pub fn publish_stamped(&mut self, sample: T) -> Result<(), RuntimeError> {
-        self.inner
-            .send_copy(sample)
-            .map_err(|e| RuntimeError::Io {
-                service: self.service.clone(),
-                reason: format!("{e:?}"),
-            })?;
+        self.inner.send_copy(sample).map_err(|e| RuntimeError::Io {
+            service: self.service.clone(),
+            reason: format!("{e:?}"),
+        })?;
         self.seq += 1;
         Ok(())
     }
@@ -237,7 +237,11 @@ impl<T: Sample> Subscriber<T> {
     /// Every sample that is ready at this step, oldest first. In lockstep, a
     /// sample is ready when it was stamped before this step's tick; later
     /// ones stay held for the next step.
-    pub fn take_ready(&mut self, ctx: &StepContext, mut f: impl FnMut(T)) -> Result<(), RuntimeError> {
+    pub fn take_ready(
+        &mut self,
+        ctx: &StepContext,
+        mut f: impl FnMut(T),
+    ) -> Result<(), RuntimeError> {
         self.pull()?;
         while let Some(front) = self.held.front() {
             if !self.ready(ctx, front) {

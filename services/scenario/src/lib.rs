@@ -1,1 +1,848 @@
-//! placeholder
+//! The scenario file: what a run is made of, parsed from TOML with serde,
+//! unknown keys refused, and validated before anything starts.
+//!
+//! The scenario owns the run's shape — vehicles and their formation tree,
+//! rates, safety distance, recording — and carries each service library's
+//! own section (`[plant]`, `[camera]`, `[sonar]`, `[mpc]`, ...) as a TOML
+//! table that the service parses into its own typed config with
+//! [`Scenario::section`]. `shoal check` parses every section, so a bad key
+//! anywhere is refused before a process is spawned.
+//!
+//! **Frames.** Slots are `[x forward, y starboard, z down]` in the parent's
+//! body frame (Fossen's FRD). The paper draws its formation with y to the
+//! left: its `(x̃, ỹ)` is our `(x, −y)`. Positions are NED, m.
+//!
+//! ```
+//! let text = r#"
+//! name = "two"
+//! duration_s = 10.0
+//! [[vehicles]]
+//! name = "L"
+//! [[vehicles]]
+//! name = "F1"
+//! parent = "L"
+//! slot_m = [-8.0, -4.0, 0.0]
+//! "#;
+//! let s = shoal_scenario::Scenario::from_toml(text).unwrap();
+//! assert_eq!(s.leader().name, "L");
+//! assert_eq!(s.processes().len(), 4 + 5 + 2);
+//! ```
+
+use std::collections::{BTreeMap, HashMap};
+
+use serde::{Deserialize, Serialize};
+
+/// The paper scenario, embedded so `shoal run` works with no file.
+pub const PAPER_TOML: &str = include_str!("../../../scenarios/paper.toml");
+
+/// Why a scenario is refused. Each message names the key.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ScenarioError {
+    /// TOML syntax error or a key the schema does not know.
+    #[error("{0}")]
+    Parse(String),
+    /// A value out of range or inconsistent; `key` names it.
+    #[error("{key}: {reason}")]
+    Invalid {
+        /// The offending key, e.g. `vehicles[2].parent`.
+        key: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+}
+
+fn invalid(key: impl Into<String>, reason: impl Into<String>) -> ScenarioError {
+    ScenarioError::Invalid {
+        key: key.into(),
+        reason: reason.into(),
+    }
+}
+
+/// Rates of every process kind, and the lockstep tick.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Rates {
+    /// Lockstep tick, s. Every rate below must be a whole number of ticks.
+    pub tick_s: f64,
+    /// sim-plant: how often it applies thrust, integrates and publishes truth and nav, Hz.
+    pub plant_hz: f64,
+    /// world snapshot, Hz.
+    pub world_hz: f64,
+    /// camera frames, Hz.
+    pub camera_hz: f64,
+    /// sonar pings, Hz.
+    pub sonar_hz: f64,
+    /// planner, Hz.
+    pub planner_hz: f64,
+    /// predictive controller, Hz (its prediction step is 1 / mpc_hz).
+    pub mpc_hz: f64,
+    /// recorder drains (realtime mode), Hz.
+    pub recorder_hz: f64,
+}
+
+impl Default for Rates {
+    fn default() -> Self {
+        Self {
+            tick_s: 0.02,
+            plant_hz: 10.0,
+            world_hz: 10.0,
+            camera_hz: 10.0,
+            sonar_hz: 10.0,
+            planner_hz: 10.0,
+            mpc_hz: 10.0,
+            recorder_hz: 10.0,
+        }
+    }
+}
+
+/// Safety limits the run is judged against.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Safety {
+    /// Safe distance between any two vehicles and D_min of the formation shift, m.
+    pub safe_distance_m: f64,
+    /// Two hulls closer than this (centre to centre) count as a collision, m.
+    pub collision_distance_m: f64,
+}
+
+impl Default for Safety {
+    fn default() -> Self {
+        Self {
+            safe_distance_m: 2.0,
+            collision_distance_m: 0.8,
+        }
+    }
+}
+
+/// MCAP chunk compression.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Compression {
+    /// zstd (default).
+    Zstd,
+    /// lz4.
+    Lz4,
+    /// none.
+    None,
+}
+
+/// How the run is recorded.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Recording {
+    /// Chunk compression.
+    pub compression: Compression,
+    /// Target chunk size, KiB.
+    pub chunk_kib: u64,
+    /// The recorder's subscriber buffer per channel (samples).
+    pub buffer: usize,
+    /// Test hook: the recorder sleeps this long per drain, so a tiny buffer overflows. 0 in real runs.
+    pub debug_delay_ms: u64,
+}
+
+impl Default for Recording {
+    fn default() -> Self {
+        Self {
+            compression: Compression::Zstd,
+            chunk_kib: 1024,
+            buffer: 16,
+            debug_delay_ms: 0,
+        }
+    }
+}
+
+/// One vehicle.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VehicleSpec {
+    /// Unique name, `[A-Za-z0-9_]+`.
+    pub name: String,
+    /// The vehicle whose beacons this one follows; none for the leader.
+    #[serde(default)]
+    pub parent: Option<String>,
+    /// The slot in the parent's frame, FRD, m (followers only).
+    #[serde(default)]
+    pub slot_m: Option<[f64; 3]>,
+    /// Start position NED, m. Default: the leader at `[0, 0, 10]`, a
+    /// follower at its slot behind its parent's start.
+    #[serde(default)]
+    pub start_ned_m: Option<[f64; 3]>,
+    /// Start heading, deg (default: the parent's).
+    #[serde(default)]
+    pub start_yaw_deg: Option<f64>,
+    /// Displacement length D_a of eq. (4), m (default: computed from the formation).
+    #[serde(default)]
+    pub d_a_m: Option<f64>,
+    /// Vertical displacement D_b of eq. (5), m, signed (+ = down) (default: computed).
+    #[serde(default)]
+    pub d_b_m: Option<f64>,
+}
+
+/// A whole scenario.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Short name.
+    pub name: String,
+    /// What the scenario shows.
+    #[serde(default)]
+    pub description: String,
+    /// Seed of every random generator in the run.
+    #[serde(default)]
+    pub seed: u64,
+    /// Simulated duration, s.
+    pub duration_s: f64,
+    /// Process rates and the lockstep tick.
+    #[serde(default)]
+    pub rates: Rates,
+    /// Safety limits.
+    #[serde(default)]
+    pub safety: Safety,
+    /// Recording options.
+    #[serde(default)]
+    pub recording: Recording,
+    /// The vehicles; exactly one has no parent (the leader).
+    pub vehicles: Vec<VehicleSpec>,
+    /// Obstacles (`sonar::Obstacle` tables).
+    #[serde(default)]
+    pub obstacles: Vec<toml::Table>,
+    /// The leader's mission (`planner::LeaderConfig`).
+    #[serde(default)]
+    pub mission: toml::Table,
+    /// Vehicle dynamics (`sim_plant::PlantConfig`).
+    #[serde(default)]
+    pub plant: toml::Table,
+    /// Navigation sensors (`sim_plant::nav::NavConfig`).
+    #[serde(default)]
+    pub nav: toml::Table,
+    /// Camera (`camera_pose::CameraConfig`).
+    #[serde(default)]
+    pub camera: toml::Table,
+    /// Beacon layout on every parent (`camera_pose::BeaconLayout`).
+    #[serde(default)]
+    pub beacons: toml::Table,
+    /// Hull shape (`camera_pose::HullConfig`).
+    #[serde(default)]
+    pub hull: toml::Table,
+    /// Pose solver (`camera_pose::PoseConfig`).
+    #[serde(default)]
+    pub pose: toml::Table,
+    /// Rangefinders (`sonar::SonarConfig`).
+    #[serde(default)]
+    pub sonar: toml::Table,
+    /// Follower planner, shared by every follower (`planner::FollowerConfig`).
+    #[serde(default)]
+    pub follower: toml::Table,
+    /// Predictive controller (`mpc::MpcConfig`).
+    #[serde(default)]
+    pub mpc: toml::Table,
+}
+
+/// A process kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ProcessKind {
+    /// Vehicle dynamics and own navigation sensors.
+    SimPlant,
+    /// One world snapshot of all vehicles.
+    World,
+    /// Follower camera: beacon pixels and the parent's pose.
+    CameraPose,
+    /// Rangefinders.
+    Sonar,
+    /// Leader guidance or follower formation shift.
+    Planner,
+    /// Predictive controller.
+    Mpc,
+    /// MCAP recorder.
+    Recorder,
+}
+
+impl ProcessKind {
+    /// Every kind.
+    pub const ALL: [ProcessKind; 7] = [
+        ProcessKind::SimPlant,
+        ProcessKind::World,
+        ProcessKind::CameraPose,
+        ProcessKind::Sonar,
+        ProcessKind::Planner,
+        ProcessKind::Mpc,
+        ProcessKind::Recorder,
+    ];
+
+    /// Kebab-case name, as in the process table.
+    pub const fn name(self) -> &'static str {
+        match self {
+            ProcessKind::SimPlant => "sim-plant",
+            ProcessKind::World => "world",
+            ProcessKind::CameraPose => "camera-pose",
+            ProcessKind::Sonar => "sonar",
+            ProcessKind::Planner => "planner",
+            ProcessKind::Mpc => "mpc",
+            ProcessKind::Recorder => "recorder",
+        }
+    }
+
+    /// The binary that runs this kind.
+    pub const fn binary(self) -> &'static str {
+        match self {
+            ProcessKind::SimPlant => "shoal-sim-plant",
+            ProcessKind::World => "shoal-world",
+            ProcessKind::CameraPose => "shoal-camera-pose",
+            ProcessKind::Sonar => "shoal-sonar",
+            ProcessKind::Planner => "shoal-planner",
+            ProcessKind::Mpc => "shoal-mpc",
+            ProcessKind::Recorder => "shoal-recorder",
+        }
+    }
+
+    /// Parses a kebab-case name.
+    pub fn from_name(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == s)
+    }
+
+    /// Pipeline stage within one lockstep frame: plant → world → sensors →
+    /// planner → mpc → (plant). The recorder drains with the plant.
+    pub const fn stage(self) -> u64 {
+        match self {
+            ProcessKind::SimPlant | ProcessKind::Recorder => 0,
+            ProcessKind::World => 1,
+            ProcessKind::CameraPose | ProcessKind::Sonar => 2,
+            ProcessKind::Planner => 3,
+            ProcessKind::Mpc => 4,
+        }
+    }
+}
+
+/// One process of the run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ProcessSpec {
+    /// Index in the run (its `done` event id).
+    pub index: usize,
+    /// Kind.
+    pub kind: ProcessKind,
+    /// Vehicle name, or `run` for run-level processes.
+    pub vehicle: String,
+    /// Wakes every `divisor` ticks...
+    pub divisor: u64,
+    /// ...on ticks where `tick % divisor == phase`.
+    pub phase: u64,
+}
+
+impl ProcessSpec {
+    /// True if the process steps on this tick.
+    pub fn due(&self, tick: u64) -> bool {
+        tick % self.divisor == self.phase
+    }
+    /// `vehicle/kind`, for messages.
+    pub fn label(&self) -> String {
+        format!("{}/{}", self.vehicle, self.kind.name())
+    }
+}
+
+/// The vehicle name of run-level processes.
+pub const RUN_VEHICLE: &str = "run";
+
+impl Scenario {
+    /// The embedded paper scenario.
+    pub fn paper() -> Result<Self, ScenarioError> {
+        Self::from_toml(PAPER_TOML)
+    }
+
+    /// Parses and validates TOML text.
+    pub fn from_toml(text: &str) -> Result<Self, ScenarioError> {
+        let s: Scenario = toml::from_str(text).map_err(|e| ScenarioError::Parse(e.to_string()))?;
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// Serialises back to TOML (the resolved scenario a run writes down).
+    pub fn to_toml(&self) -> Result<String, ScenarioError> {
+        toml::to_string(self).map_err(|e| ScenarioError::Parse(e.to_string()))
+    }
+
+    /// Parses one service section into that service's typed config.
+    pub fn section<T: serde::de::DeserializeOwned>(&self, key: &str) -> Result<T, ScenarioError> {
+        let table = match key {
+            "mission" => &self.mission,
+            "plant" => &self.plant,
+            "nav" => &self.nav,
+            "camera" => &self.camera,
+            "beacons" => &self.beacons,
+            "hull" => &self.hull,
+            "pose" => &self.pose,
+            "sonar" => &self.sonar,
+            "follower" => &self.follower,
+            "mpc" => &self.mpc,
+            other => return Err(invalid(other, "no such section")),
+        };
+        toml::Value::Table(table.clone())
+            .try_into()
+            .map_err(|e: toml::de::Error| invalid(key, e.message().to_string()))
+    }
+
+    /// Parses the obstacle list into the sonar's obstacle type.
+    pub fn obstacles_as<T: serde::de::DeserializeOwned>(&self) -> Result<Vec<T>, ScenarioError> {
+        self.obstacles
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                toml::Value::Table(t.clone())
+                    .try_into()
+                    .map_err(|e: toml::de::Error| {
+                        invalid(format!("obstacles[{i}]"), e.message().to_string())
+                    })
+            })
+            .collect()
+    }
+
+    /// Checks the scenario's own keys: names, the formation tree, sizes, rates.
+    pub fn validate(&self) -> Result<(), ScenarioError> {
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
+            return Err(invalid(
+                "duration_s",
+                format!("must be > 0, got {}", self.duration_s),
+            ));
+        }
+        let r = &self.rates;
+        if !(r.tick_s.is_finite() && r.tick_s > 0.0 && r.tick_s <= 1.0) {
+            return Err(invalid(
+                "rates.tick_s",
+                format!("must be in (0, 1] s, got {}", r.tick_s),
+            ));
+        }
+        for (key, hz) in [
+            ("rates.plant_hz", r.plant_hz),
+            ("rates.world_hz", r.world_hz),
+            ("rates.camera_hz", r.camera_hz),
+            ("rates.sonar_hz", r.sonar_hz),
+            ("rates.planner_hz", r.planner_hz),
+            ("rates.mpc_hz", r.mpc_hz),
+            ("rates.recorder_hz", r.recorder_hz),
+        ] {
+            if !(hz.is_finite() && hz > 0.0) {
+                return Err(invalid(key, format!("must be > 0 Hz, got {hz}")));
+            }
+            let ticks = 1.0 / (hz * r.tick_s);
+            if ticks < 0.999 || (ticks - ticks.round()).abs() > 1e-6 {
+                return Err(invalid(
+                    key,
+                    format!(
+                        "{hz} Hz is not a whole number of {} s ticks (period/tick = {ticks:.4})",
+                        r.tick_s
+                    ),
+                ));
+            }
+        }
+        let s = &self.safety;
+        if !(s.safe_distance_m.is_finite() && s.safe_distance_m > 0.0) {
+            return Err(invalid(
+                "safety.safe_distance_m",
+                format!("must be > 0, got {}", s.safe_distance_m),
+            ));
+        }
+        if !(s.collision_distance_m.is_finite()
+            && s.collision_distance_m > 0.0
+            && s.collision_distance_m < s.safe_distance_m)
+        {
+            return Err(invalid(
+                "safety.collision_distance_m",
+                format!(
+                    "must be > 0 and below safety.safe_distance_m, got {}",
+                    s.collision_distance_m
+                ),
+            ));
+        }
+        if self.recording.buffer == 0 || self.recording.buffer > 1024 {
+            return Err(invalid(
+                "recording.buffer",
+                format!("must be in 1..=1024, got {}", self.recording.buffer),
+            ));
+        }
+        if self.recording.chunk_kib == 0 {
+            return Err(invalid("recording.chunk_kib", "must be > 0"));
+        }
+        self.validate_vehicles()
+    }
+
+    fn validate_vehicles(&self) -> Result<(), ScenarioError> {
+        if self.vehicles.is_empty() {
+            return Err(invalid("vehicles", "at least one vehicle is needed"));
+        }
+        if self.vehicles.len() > ipc_types_max_vehicles() {
+            return Err(invalid(
+                "vehicles",
+                format!(
+                    "{} vehicles, at most {} fit in the world snapshot",
+                    self.vehicles.len(),
+                    ipc_types_max_vehicles()
+                ),
+            ));
+        }
+        let mut index: HashMap<&str, usize> = HashMap::new();
+        for (i, v) in self.vehicles.iter().enumerate() {
+            let key = format!("vehicles[{i}].name");
+            if v.name.is_empty()
+                || v.name == RUN_VEHICLE
+                || !v
+                    .name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_')
+            {
+                return Err(invalid(
+                    key,
+                    format!("`{}` must be [A-Za-z0-9_]+ and not `{RUN_VEHICLE}`", v.name),
+                ));
+            }
+            if index.insert(&v.name, i).is_some() {
+                return Err(invalid(key, format!("`{}` is used twice", v.name)));
+            }
+        }
+        let leaders: Vec<usize> = (0..self.vehicles.len())
+            .filter(|&i| self.vehicles[i].parent.is_none())
+            .collect();
+        if leaders.len() != 1 {
+            let names: Vec<&str> = leaders
+                .iter()
+                .map(|&i| self.vehicles[i].name.as_str())
+                .collect();
+            return Err(invalid(
+                "vehicles",
+                format!(
+                    "exactly one vehicle must have no parent (the leader), found {}: {names:?}",
+                    leaders.len()
+                ),
+            ));
+        }
+        for (i, v) in self.vehicles.iter().enumerate() {
+            let check3 = |key: String, a: &[f64; 3]| -> Result<(), ScenarioError> {
+                if a.iter().all(|x| x.is_finite()) {
+                    Ok(())
+                } else {
+                    Err(invalid(key, "values must be finite"))
+                }
+            };
+            if let Some(p) = &v.parent {
+                if !index.contains_key(p.as_str()) {
+                    return Err(invalid(
+                        format!("vehicles[{i}].parent"),
+                        format!("`{p}` is not a vehicle of this scenario"),
+                    ));
+                }
+                if p == &v.name {
+                    return Err(invalid(
+                        format!("vehicles[{i}].parent"),
+                        format!("`{}` cannot follow itself", v.name),
+                    ));
+                }
+                let Some(slot) = &v.slot_m else {
+                    return Err(invalid(
+                        format!("vehicles[{i}].slot_m"),
+                        format!("follower `{}` needs a slot in its parent's frame", v.name),
+                    ));
+                };
+                check3(format!("vehicles[{i}].slot_m"), slot)?;
+                let horizontal = (slot[0] * slot[0] + slot[1] * slot[1]).sqrt();
+                if horizontal < self.safety.safe_distance_m {
+                    return Err(invalid(
+                        format!("vehicles[{i}].slot_m"),
+                        format!(
+                            "slot is {horizontal:.2} m from the parent, closer than safety.safe_distance_m = {}",
+                            self.safety.safe_distance_m
+                        ),
+                    ));
+                }
+                if slot[0] >= 0.0 {
+                    return Err(invalid(
+                        format!("vehicles[{i}].slot_m"),
+                        "x must be negative: a follower's camera looks forward at its parent",
+                    ));
+                }
+            } else if v.slot_m.is_some() {
+                return Err(invalid(
+                    format!("vehicles[{i}].slot_m"),
+                    "the leader has no slot",
+                ));
+            }
+            if let Some(s) = &v.start_ned_m {
+                check3(format!("vehicles[{i}].start_ned_m"), s)?;
+            }
+            if let Some(y) = v.start_yaw_deg {
+                if !y.is_finite() {
+                    return Err(invalid(
+                        format!("vehicles[{i}].start_yaw_deg"),
+                        "must be finite",
+                    ));
+                }
+            }
+            if let Some(d) = v.d_a_m {
+                if !(d.is_finite() && d >= 0.0) {
+                    return Err(invalid(
+                        format!("vehicles[{i}].d_a_m"),
+                        format!("must be >= 0, got {d}"),
+                    ));
+                }
+            }
+            if let Some(d) = v.d_b_m {
+                if !d.is_finite() {
+                    return Err(invalid(format!("vehicles[{i}].d_b_m"), "must be finite"));
+                }
+            }
+        }
+        // Cycles: walk up from every vehicle; a tree reaches the leader in < n steps.
+        for (i, v) in self.vehicles.iter().enumerate() {
+            let mut seen = vec![v.name.as_str()];
+            let mut cur = v;
+            while let Some(p) = &cur.parent {
+                if seen.contains(&p.as_str()) {
+                    seen.push(p);
+                    return Err(invalid(
+                        format!("vehicles[{i}].parent"),
+                        format!("the formation tree has a cycle: {}", seen.join(" -> ")),
+                    ));
+                }
+                seen.push(p);
+                cur = &self.vehicles[index[p.as_str()]];
+            }
+        }
+        Ok(())
+    }
+
+    /// The leader (the one vehicle with no parent).
+    pub fn leader(&self) -> &VehicleSpec {
+        // validate() guarantees exactly one.
+        self.vehicles
+            .iter()
+            .find(|v| v.parent.is_none())
+            .unwrap_or(&self.vehicles[0])
+    }
+
+    /// A vehicle by name.
+    pub fn vehicle(&self, name: &str) -> Option<&VehicleSpec> {
+        self.vehicles.iter().find(|v| v.name == name)
+    }
+
+    /// Index of a vehicle in scenario order (its slot in the world snapshot).
+    pub fn vehicle_index(&self, name: &str) -> Option<usize> {
+        self.vehicles.iter().position(|v| v.name == name)
+    }
+
+    /// Start position (NED, m) and heading (rad) of every vehicle, resolved:
+    /// a follower without an explicit start sits in its slot behind its
+    /// parent's start, with the parent's heading.
+    pub fn start_poses(&self) -> BTreeMap<String, ([f64; 3], f64)> {
+        let mut out: BTreeMap<String, ([f64; 3], f64)> = BTreeMap::new();
+        // Resolve in tree order: parents first (validate() rules out cycles).
+        let mut pending: Vec<&VehicleSpec> = self.vehicles.iter().collect();
+        let mut guard = 0;
+        while !pending.is_empty() && guard <= self.vehicles.len() {
+            guard += 1;
+            pending.retain(|v| {
+                let resolved = match &v.parent {
+                    None => Some((
+                        v.start_ned_m.unwrap_or([0.0, 0.0, 10.0]),
+                        v.start_yaw_deg.unwrap_or(0.0).to_radians(),
+                    )),
+                    Some(p) => out.get(p).map(|&(pp, pyaw)| {
+                        let yaw = v.start_yaw_deg.map_or(pyaw, f64::to_radians);
+                        let pos = v.start_ned_m.unwrap_or_else(|| {
+                            let s = v.slot_m.unwrap_or([0.0; 3]);
+                            let (sn, cs) = pyaw.sin_cos();
+                            [
+                                pp[0] + cs * s[0] - sn * s[1],
+                                pp[1] + sn * s[0] + cs * s[1],
+                                pp[2] + s[2],
+                            ]
+                        });
+                        (pos, yaw)
+                    }),
+                };
+                match resolved {
+                    Some(r) => {
+                        out.insert(v.name.clone(), r);
+                        false
+                    }
+                    None => true,
+                }
+            });
+        }
+        out
+    }
+
+    /// How many lockstep ticks one period of `hz` lasts.
+    pub fn divisor(&self, hz: f64) -> u64 {
+        (1.0 / (hz * self.rates.tick_s)).round().max(1.0) as u64
+    }
+
+    /// Rate of a process kind, Hz.
+    pub fn rate_hz(&self, kind: ProcessKind) -> f64 {
+        let r = &self.rates;
+        match kind {
+            ProcessKind::SimPlant => r.plant_hz,
+            ProcessKind::World => r.world_hz,
+            ProcessKind::CameraPose => r.camera_hz,
+            ProcessKind::Sonar => r.sonar_hz,
+            ProcessKind::Planner => r.planner_hz,
+            ProcessKind::Mpc => r.mpc_hz,
+            ProcessKind::Recorder => r.recorder_hz,
+        }
+    }
+
+    /// Every process of the run in a fixed order: world, recorder, then per
+    /// vehicle sim-plant, camera-pose (followers only), sonar, planner, mpc.
+    pub fn processes(&self) -> Vec<ProcessSpec> {
+        let mut out = Vec::new();
+        let push = |kind: ProcessKind, vehicle: &str, out: &mut Vec<ProcessSpec>| {
+            let divisor = if kind == ProcessKind::Recorder {
+                // The recorder drains every frame of the slowest pipeline:
+                // with the plant's divisor it sees each frame's samples once.
+                self.divisor(self.rates.plant_hz)
+            } else {
+                self.divisor(self.rate_hz(kind))
+            };
+            out.push(ProcessSpec {
+                index: out.len(),
+                kind,
+                vehicle: vehicle.to_string(),
+                divisor,
+                phase: kind.stage() % divisor,
+            });
+        };
+        push(ProcessKind::World, RUN_VEHICLE, &mut out);
+        push(ProcessKind::Recorder, RUN_VEHICLE, &mut out);
+        for v in &self.vehicles {
+            push(ProcessKind::SimPlant, &v.name, &mut out);
+            if v.parent.is_some() {
+                push(ProcessKind::CameraPose, &v.name, &mut out);
+            }
+            push(ProcessKind::Sonar, &v.name, &mut out);
+            push(ProcessKind::Planner, &v.name, &mut out);
+            push(ProcessKind::Mpc, &v.name, &mut out);
+        }
+        out
+    }
+
+    /// Number of lockstep ticks in the run.
+    pub fn ticks(&self) -> u64 {
+        (self.duration_s / self.rates.tick_s).round() as u64
+    }
+}
+
+const fn ipc_types_max_vehicles() -> usize {
+    256
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    const BASE: &str = r#"
+name = "t"
+duration_s = 10.0
+[[vehicles]]
+name = "L"
+[[vehicles]]
+name = "F1"
+parent = "L"
+slot_m = [-8.0, -4.0, 0.0]
+[[vehicles]]
+name = "F3"
+parent = "F1"
+slot_m = [-8.0, -4.0, 0.0]
+"#;
+
+    fn err_of(text: &str) -> String {
+        Scenario::from_toml(text).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn paper_scenario_parses() {
+        let s = Scenario::paper().unwrap();
+        assert_eq!(s.vehicles.len(), 5);
+        assert_eq!(s.leader().name, "L");
+        // 2 run-level + 5 vehicles × 4 + 4 cameras
+        assert_eq!(s.processes().len(), 2 + 5 * 4 + 4);
+    }
+
+    #[test]
+    fn unknown_key_is_named() {
+        let e = err_of(&format!("{BASE}\nspeed = 3\n"));
+        assert!(e.contains("speed"), "{e}");
+        let e = err_of(&BASE.replace(
+            "slot_m = [-8.0, -4.0, 0.0]\n[[vehicles]]\nname = \"F3\"",
+            "slot_m = [-8.0, -4.0, 0.0]\nslott = 1\n[[vehicles]]\nname = \"F3\"",
+        ));
+        assert!(e.contains("slott"), "{e}");
+    }
+
+    #[test]
+    fn missing_parent_is_named() {
+        let e = err_of(&BASE.replace("parent = \"F1\"", "parent = \"F9\""));
+        assert!(e.contains("vehicles[2].parent") && e.contains("F9"), "{e}");
+    }
+
+    #[test]
+    fn cycle_is_named() {
+        let text = BASE.replace(
+            "name = \"F1\"\nparent = \"L\"",
+            "name = \"F1\"\nparent = \"F3\"",
+        );
+        // now F1 -> F3 -> F1 and L alone
+        let e = err_of(&text);
+        assert!(e.contains("cycle"), "{e}");
+    }
+
+    #[test]
+    fn negative_size_is_named() {
+        let e = err_of(&format!("{BASE}\n[safety]\nsafe_distance_m = -1.0\n"));
+        assert!(e.contains("safety.safe_distance_m"), "{e}");
+        let e = err_of(&BASE.replace("duration_s = 10.0", "duration_s = -5.0"));
+        assert!(e.contains("duration_s"), "{e}");
+    }
+
+    #[test]
+    fn rates_must_fit_the_tick() {
+        let e = err_of(&format!("{BASE}\n[rates]\ncamera_hz = 7.0\n"));
+        assert!(e.contains("rates.camera_hz"), "{e}");
+    }
+
+    #[test]
+    fn followers_start_in_their_slots() {
+        let s = Scenario::from_toml(BASE).unwrap();
+        let p = s.start_poses();
+        let f3 = p["F3"].0;
+        assert!((f3[0] + 16.0).abs() < 1e-12 && (f3[1] + 8.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn schedule_is_a_pipeline() {
+        let s = Scenario::from_toml(BASE).unwrap();
+        let procs = s.processes();
+        let plant = procs
+            .iter()
+            .find(|p| p.kind == ProcessKind::SimPlant)
+            .unwrap();
+        let mpc = procs.iter().find(|p| p.kind == ProcessKind::Mpc).unwrap();
+        assert_eq!(plant.divisor, 5);
+        assert!(plant.due(0) && plant.due(5) && !plant.due(4));
+        assert!(mpc.due(4));
+    }
+
+    proptest! {
+        #[test]
+        fn parser_never_panics(text in ".{0,400}") {
+            let _ = Scenario::from_toml(&text);
+        }
+
+        #[test]
+        fn mutated_scenarios_never_panic(cut in 0usize..400, insert in "[\\[\\]=\"a-z0-9 .\\-\n]{0,12}") {
+            let mut t = BASE.to_string();
+            let at = cut.min(t.len());
+            if t.is_char_boundary(at) {
+                t.insert_str(at, &insert);
+            }
+            let _ = Scenario::from_toml(&t);
+        }
+    }
+}
