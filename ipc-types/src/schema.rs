@@ -199,3 +199,41 @@ pub fn cdr_size<T: Described>() -> usize {
     }
     walk(&T::fields(), 0)
 }
+
+/// Byte ranges of the fields of `T` that hold wall-clock readings (names
+/// ending in `mono_ns`, and `solve_ns`): the only bytes allowed to differ
+/// between two lockstep runs of the same scenario and seed.
+pub fn wall_clock_ranges<T: Described>() -> Vec<std::ops::Range<usize>> {
+    fn walk(
+        fields: &[FieldDesc],
+        off: &mut usize,
+        wall: bool,
+        out: &mut Vec<std::ops::Range<usize>>,
+    ) {
+        for f in fields {
+            let is_wall = wall || f.name.ends_with("mono_ns") || f.name == "solve_ns";
+            walk_ty(&f.ty, off, is_wall, out);
+        }
+    }
+    fn walk_ty(ty: &TypeDesc, off: &mut usize, wall: bool, out: &mut Vec<std::ops::Range<usize>>) {
+        match ty {
+            TypeDesc::Primitive { size, .. } => {
+                *off = off.next_multiple_of(*size);
+                if wall {
+                    out.push(*off..*off + size);
+                }
+                *off += size;
+            }
+            TypeDesc::Nested { fields, .. } => walk(&fields(), off, wall, out),
+            TypeDesc::Array { elem, len } => {
+                for _ in 0..*len {
+                    walk_ty(elem, off, wall, out);
+                }
+            }
+        }
+    }
+    let mut out = Vec::new();
+    let mut off = 0;
+    walk(&T::fields(), &mut off, false, &mut out);
+    out
+}

@@ -243,21 +243,7 @@ pub struct Runtime {
 impl Runtime {
     /// Creates the node `<vehicle>/<process>` in the run's domain.
     pub fn new(args: &RunArgs) -> Result<Self, RuntimeError> {
-        let config = iceoryx_config(&args.run_id);
-        let name = format!("{}/{}", args.vehicle, args.process);
-        let node_name = NodeName::new(&name).map_err(|e| RuntimeError::Node {
-            name: name.clone(),
-            reason: format!("{e:?}"),
-        })?;
-        let node = NodeBuilder::new()
-            .name(&node_name)
-            .config(&config)
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<ipc::Service>()
-            .map_err(|e| RuntimeError::Node {
-                name,
-                reason: format!("{e:?}"),
-            })?;
+        let node = domain_node(&args.run_id, &format!("{}/{}", args.vehicle, args.process))?;
         Ok(Self {
             node,
             args: args.clone(),
@@ -305,21 +291,7 @@ impl Runtime {
         &self,
     ) -> Result<iceoryx2::port::notifier::Notifier<ipc::Service>, RuntimeError> {
         let name = ipc_types::run_service_name(&self.args.run_id, RunChannel::Done);
-        let limits = ChannelLimits::done(self.args.processes);
-        let service = self
-            .node
-            .service_builder(&service_name(&name)?)
-            .event()
-            .max_notifiers(limits.max_publishers)
-            .max_listeners(limits.max_subscribers)
-            .max_nodes(limits.max_nodes)
-            .event_id_max_value(self.args.processes.max(1))
-            .open_or_create()
-            .map_err(|e| RuntimeError::Service {
-                service: name.clone(),
-                reason: format!("{e:?}"),
-            })?;
-        service
+        open_done(&self.node, &self.args.run_id, self.args.processes)?
             .notifier_builder()
             .default_event_id(EventId::new(self.args.index))
             .create()
@@ -332,18 +304,12 @@ impl Runtime {
     fn run_lockstep<T: Task>(self, mut task: T) -> Result<RunReport, RuntimeError> {
         let wake_name =
             ipc_types::wake_service_name(&self.args.run_id, &self.args.vehicle, &self.args.process);
-        let wake_service = self
-            .node
-            .service_builder(&service_name(&wake_name)?)
-            .event()
-            .max_notifiers(2)
-            .max_listeners(2)
-            .max_nodes(4)
-            .open_or_create()
-            .map_err(|e| RuntimeError::Service {
-                service: wake_name.clone(),
-                reason: format!("{e:?}"),
-            })?;
+        let wake_service = open_wake(
+            &self.node,
+            &self.args.run_id,
+            &self.args.vehicle,
+            &self.args.process,
+        )?;
         let wake = wake_service
             .listener_builder()
             .create()
@@ -440,6 +406,11 @@ impl Runtime {
     }
 
     fn run_realtime<T: Task>(self, mut task: T) -> Result<RunReport, RuntimeError> {
+        let done = self.done_notifier()?;
+        done.notify().map_err(|e| RuntimeError::Io {
+            service: "done".into(),
+            reason: format!("{e:?}"),
+        })?;
         let period = Duration::from_secs_f64(self.args.period_s.max(1e-4));
         let period_ns = period.as_nanos() as u64;
         let epoch = if self.args.epoch_mono_ns == 0 {
@@ -510,4 +481,95 @@ pub(crate) fn service_name(name: &str) -> Result<ServiceName, RuntimeError> {
         service: name.to_string(),
         reason: format!("{e:?}"),
     })
+}
+
+/// The command line of every service binary: the run arguments and the
+/// resolved scenario file the orchestrator wrote.
+#[derive(Debug, Clone, clap::Parser)]
+#[command(about = "A shoal service process; started by `shoal run`, not by hand.")]
+pub struct ServiceCli {
+    /// Run arguments.
+    #[command(flatten)]
+    pub run: RunArgs,
+    /// The run's resolved scenario (TOML).
+    #[arg(long)]
+    pub scenario: std::path::PathBuf,
+}
+
+/// Opens the `done` event service of a run (same limits for every opener).
+pub fn open_done(
+    node: &Node<ipc::Service>,
+    run_id: &str,
+    processes: usize,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, RuntimeError> {
+    let name = ipc_types::run_service_name(run_id, RunChannel::Done);
+    let limits = ChannelLimits::done(processes);
+    node.service_builder(&service_name(&name)?)
+        .event()
+        .max_notifiers(limits.max_publishers)
+        .max_listeners(limits.max_subscribers)
+        .max_nodes(limits.max_nodes)
+        .event_id_max_value(processes.max(1))
+        .open_or_create()
+        .map_err(|e| RuntimeError::Service {
+            service: name,
+            reason: format!("{e:?}"),
+        })
+}
+
+/// Opens one process's lockstep wake-up event service.
+pub fn open_wake(
+    node: &Node<ipc::Service>,
+    run_id: &str,
+    vehicle: &str,
+    process: &str,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, RuntimeError> {
+    let name = ipc_types::wake_service_name(run_id, vehicle, process);
+    node.service_builder(&service_name(&name)?)
+        .event()
+        .max_notifiers(2)
+        .max_listeners(2)
+        .max_nodes(4)
+        .open_or_create()
+        .map_err(|e| RuntimeError::Service {
+            service: name,
+            reason: format!("{e:?}"),
+        })
+}
+
+/// Creates a node in a run's domain (the orchestrator's, a test's, a replayer's).
+pub fn domain_node(run_id: &str, name: &str) -> Result<Node<ipc::Service>, RuntimeError> {
+    let config = iceoryx_config(run_id);
+    let node_name = NodeName::new(name).map_err(|e| RuntimeError::Node {
+        name: name.to_string(),
+        reason: format!("{e:?}"),
+    })?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .config(&config)
+        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+        .create::<ipc::Service>()
+        .map_err(|e| RuntimeError::Node {
+            name: name.to_string(),
+            reason: format!("{e:?}"),
+        })
+}
+
+/// Opens a publisher on a node that is not a [`Runtime`] (the orchestrator's clock).
+pub fn node_publisher<T: ipc_types::Sample>(
+    node: &Node<ipc::Service>,
+    service: &str,
+    limits: &ChannelLimits,
+) -> Result<Publisher<T>, RuntimeError> {
+    Publisher::open(node, service, limits)
+}
+
+/// Opens a subscriber on a node that is not a [`Runtime`] (tests, tools).
+pub fn node_subscriber<T: ipc_types::Sample>(
+    node: &Node<ipc::Service>,
+    service: &str,
+    limits: &ChannelLimits,
+    buffer: usize,
+) -> Result<Subscriber<T>, RuntimeError> {
+    Subscriber::open(node, service, limits, buffer, Mode::Realtime)
 }

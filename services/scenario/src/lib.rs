@@ -846,3 +846,12 @@ slot_m = [-8.0, -4.0, 0.0]
         }
     }
 }
+
+impl Scenario {
+    /// Reads and validates a scenario file.
+    pub fn from_file(path: &std::path::Path) -> Result<Self, ScenarioError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ScenarioError::Parse(format!("cannot read {}: {e}", path.display())))?;
+        Self::from_toml(&text)
+    }
+}

@@ -1,0 +1,32 @@
+//! `shoal-recorder`: subscribes to every channel of the run and writes one
+//! MCAP file. In lockstep it writes, each frame, the samples stamped before
+//! the frame in a fixed order (time, channel, sequence), so two runs of the
+//! same scenario and seed give the same messages.
+use clap::Parser;
+
+mod node;
+
+/// Command line of the recorder.
+#[derive(Debug, clap::Parser)]
+#[command(about = "shoal's recorder process; started by `shoal run`, not by hand.")]
+struct Cli {
+    #[command(flatten)]
+    run: shoal_runtime::RunArgs,
+    /// The run's resolved scenario.
+    #[arg(long)]
+    scenario: std::path::PathBuf,
+    /// The MCAP file to write.
+    #[arg(long)]
+    out: std::path::PathBuf,
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    shoal_runtime::init_tracing();
+    let text = std::fs::read_to_string(&cli.scenario)?;
+    let scenario = shoal_scenario::Scenario::from_toml(&text)?;
+    let rt = shoal_runtime::Runtime::new(&cli.run)?;
+    let task = node::RecorderTask::new(&rt, &scenario, &text, &cli.out)?;
+    rt.run(task)?;
+    Ok(())
+}

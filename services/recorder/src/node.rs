@@ -1,0 +1,297 @@
+//! The recorder task.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use ipc_types::{Channel, RunChannel, Sample};
+use recordings::{Compression, RecordingWriter, WriterOptions};
+use shoal_runtime::{
+    ChannelLimits, Runtime, RuntimeError, StepContext, Subscriber, Task, TaskError,
+};
+use shoal_scenario::Scenario;
+
+/// A sample waiting to be written.
+struct Pending {
+    sim_time_ns: u64,
+    order: usize,
+    seq: u64,
+    start: usize,
+    len: usize,
+}
+
+/// One recorded channel, type-erased.
+trait Tap {
+    fn drain(
+        &mut self,
+        ctx: Option<&StepContext>,
+        order: usize,
+        arena: &mut Vec<u8>,
+        out: &mut Vec<Pending>,
+    ) -> Result<(), RuntimeError>;
+    fn channel(&self) -> u16;
+    fn lost(&self) -> u64;
+    fn rejected(&self) -> u64;
+}
+
+struct TypedTap<T: Sample> {
+    sub: Subscriber<T>,
+    channel: u16,
+}
+
+impl<T: Sample> Tap for TypedTap<T> {
+    fn drain(
+        &mut self,
+        ctx: Option<&StepContext>,
+        order: usize,
+        arena: &mut Vec<u8>,
+        out: &mut Vec<Pending>,
+    ) -> Result<(), RuntimeError> {
+        let push = |v: T| {
+            let start = arena.len();
+            arena.extend_from_slice(bytemuck::bytes_of(&v));
+            out.push(Pending {
+                sim_time_ns: v.header().sim_time_ns,
+                order,
+                seq: v.header().seq,
+                start,
+                len: std::mem::size_of::<T>(),
+            });
+        };
+        match ctx {
+            Some(ctx) => self.sub.take_ready(ctx, push),
+            None => {
+                // Final drain: everything, regardless of stamp.
+                let far = StepContext {
+                    sim_time_ns: u64::MAX,
+                    tick: 0,
+                    wake_mono_ns: 0,
+                    since_last_ns: 0,
+                    last: true,
+                    mode: shoal_runtime::Mode::Lockstep,
+                };
+                self.sub.take_ready(&far, push)
+            }
+        }
+    }
+    fn channel(&self) -> u16 {
+        self.channel
+    }
+    fn lost(&self) -> u64 {
+        self.sub.lost()
+    }
+    fn rejected(&self) -> u64 {
+        self.sub.rejected()
+    }
+}
+
+pub struct RecorderTask {
+    writer: Option<RecordingWriter>,
+    taps: Vec<Box<dyn Tap>>,
+    arena: Vec<u8>,
+    batch: Vec<Pending>,
+    debug_delay: std::time::Duration,
+    last_flush_mono_ns: u64,
+}
+
+fn open_tap<T: Sample>(
+    rt: &Runtime,
+    writer: &mut RecordingWriter,
+    service: &str,
+    topic: &str,
+    limits: &ChannelLimits,
+    buffer: usize,
+) -> anyhow::Result<Box<dyn Tap>> {
+    let sub = rt.subscriber::<T>(service, limits, buffer)?;
+    let channel = writer.add_channel::<T>(topic)?;
+    Ok(Box::new(TypedTap { sub, channel }))
+}
+
+impl RecorderTask {
+    pub fn new(
+        rt: &Runtime,
+        scenario: &Scenario,
+        scenario_text: &str,
+        out: &Path,
+    ) -> anyhow::Result<Self> {
+        let opts = WriterOptions {
+            compression: match scenario.recording.compression {
+                shoal_scenario::Compression::Zstd => Compression::Zstd,
+                shoal_scenario::Compression::Lz4 => Compression::Lz4,
+                shoal_scenario::Compression::None => Compression::None,
+            },
+            chunk_bytes: scenario.recording.chunk_kib * 1024,
+        };
+        let mut writer = RecordingWriter::create(out, &opts)?;
+        let mut meta = BTreeMap::new();
+        meta.insert("scenario".to_string(), scenario.name.clone());
+        meta.insert("scenario_toml".to_string(), scenario_text.to_string());
+        meta.insert("seed".to_string(), scenario.seed.to_string());
+        meta.insert("mode".to_string(), rt.args().mode.as_str().to_string());
+        meta.insert(
+            "shoal_version".to_string(),
+            env!("CARGO_PKG_VERSION").to_string(),
+        );
+        meta.insert("vehicles".to_string(), scenario.vehicles.len().to_string());
+        writer.metadata("shoal.run", meta)?;
+
+        let run = rt.args().run_id.clone();
+        let buffer = scenario.recording.buffer;
+        let vlimits = ChannelLimits::vehicle();
+        let mut taps: Vec<Box<dyn Tap>> = Vec::new();
+        taps.push(open_tap::<ipc_types::World>(
+            rt,
+            &mut writer,
+            &ipc_types::run_service_name(&run, RunChannel::World),
+            "/world",
+            &ChannelLimits::world(scenario.vehicles.len()),
+            buffer.min(4),
+        )?);
+        for v in &scenario.vehicles {
+            for ch in Channel::ALL {
+                if ch.follower_only() && v.parent.is_none() {
+                    continue;
+                }
+                let service = ipc_types::service_name(&run, &v.name, ch);
+                let topic = ipc_types::topic(&v.name, ch);
+                let b = buffer.min(vlimits.max_buffer);
+                let tap = match ch {
+                    Channel::Truth => open_tap::<ipc_types::Truth>(
+                        rt,
+                        &mut writer,
+                        &service,
+                        &topic,
+                        &vlimits,
+                        b,
+                    )?,
+                    Channel::Nav => {
+                        open_tap::<ipc_types::Nav>(rt, &mut writer, &service, &topic, &vlimits, b)?
+                    }
+                    Channel::Thrust => open_tap::<ipc_types::Thrust>(
+                        rt,
+                        &mut writer,
+                        &service,
+                        &topic,
+                        &vlimits,
+                        b,
+                    )?,
+                    Channel::Sonar => open_tap::<ipc_types::Sonar>(
+                        rt,
+                        &mut writer,
+                        &service,
+                        &topic,
+                        &vlimits,
+                        b,
+                    )?,
+                    Channel::Beacons => open_tap::<ipc_types::Beacons>(
+                        rt,
+                        &mut writer,
+                        &service,
+                        &topic,
+                        &vlimits,
+                        b,
+                    )?,
+                    Channel::LeaderPose => open_tap::<ipc_types::LeaderPose>(
+                        rt,
+                        &mut writer,
+                        &service,
+                        &topic,
+                        &vlimits,
+                        b,
+                    )?,
+                    Channel::Setpoint => open_tap::<ipc_types::Setpoint>(
+                        rt,
+                        &mut writer,
+                        &service,
+                        &topic,
+                        &vlimits,
+                        b,
+                    )?,
+                    Channel::PlannerState => open_tap::<ipc_types::PlannerState>(
+                        rt,
+                        &mut writer,
+                        &service,
+                        &topic,
+                        &vlimits,
+                        b,
+                    )?,
+                    Channel::MpcStats => open_tap::<ipc_types::MpcStats>(
+                        rt,
+                        &mut writer,
+                        &service,
+                        &topic,
+                        &vlimits,
+                        b,
+                    )?,
+                };
+                taps.push(tap);
+            }
+        }
+        Ok(Self {
+            writer: Some(writer),
+            taps,
+            arena: Vec::with_capacity(1 << 20),
+            batch: Vec::with_capacity(4096),
+            debug_delay: std::time::Duration::from_millis(scenario.recording.debug_delay_ms),
+            last_flush_mono_ns: shoal_runtime::mono_ns(),
+        })
+    }
+
+    fn drain(&mut self, ctx: Option<&StepContext>) -> Result<(), TaskError> {
+        self.arena.clear();
+        self.batch.clear();
+        for (order, tap) in self.taps.iter_mut().enumerate() {
+            tap.drain(ctx, order, &mut self.arena, &mut self.batch)?;
+        }
+        self.batch
+            .sort_unstable_by_key(|p| (p.sim_time_ns, p.order, p.seq));
+        let Some(writer) = self.writer.as_mut() else {
+            return Ok(());
+        };
+        for p in &self.batch {
+            let channel = self.taps[p.order].channel();
+            writer
+                .write_raw(
+                    channel,
+                    p.sim_time_ns,
+                    p.seq,
+                    &self.arena[p.start..p.start + p.len],
+                )
+                .map_err(TaskError::from_display)?;
+        }
+        // Close a chunk about once a second so a killed run loses little.
+        let now = shoal_runtime::mono_ns();
+        if now.saturating_sub(self.last_flush_mono_ns) > 1_000_000_000 {
+            writer.flush().map_err(TaskError::from_display)?;
+            self.last_flush_mono_ns = now;
+        }
+        Ok(())
+    }
+}
+
+impl Task for RecorderTask {
+    fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        if !self.debug_delay.is_zero() {
+            std::thread::sleep(self.debug_delay);
+        }
+        let ctx = (ctx.mode == shoal_runtime::Mode::Lockstep).then_some(ctx);
+        self.drain(ctx)
+    }
+
+    fn finish(&mut self) -> Result<(), TaskError> {
+        self.drain(None)?;
+        let lost: u64 = self.taps.iter().map(|t| t.lost()).sum();
+        let rejected: u64 = self.taps.iter().map(|t| t.rejected()).sum();
+        if let Some(mut writer) = self.writer.take() {
+            let mut meta = BTreeMap::new();
+            meta.insert("messages".to_string(), writer.messages().to_string());
+            meta.insert("dropped".to_string(), lost.to_string());
+            meta.insert("rejected".to_string(), rejected.to_string());
+            writer
+                .metadata("shoal.recorder", meta)
+                .map_err(TaskError::from_display)?;
+            let n = writer.finish().map_err(TaskError::from_display)?;
+            tracing::info!(messages = n, dropped = lost, rejected, "recording finished");
+        }
+        Ok(())
+    }
+}
