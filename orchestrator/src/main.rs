@@ -1,1 +1,236 @@
-fn main() {}
+//! `shoal`: runs a group of AUVs in leader–follower formation as real
+//! processes over iceoryx2, records every channel to MCAP, and inspects the
+//! recordings. See `shoal --help`.
+
+mod check;
+mod run;
+mod summary;
+mod supervisor;
+mod sys;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use shoal_runtime::Mode;
+use shoal_scenario::Scenario;
+
+/// Leader–follower AUV formations as multi-process soft-real-time software.
+#[derive(Debug, Parser)]
+#[command(name = "shoal", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Debug, Subcommand)]
+enum Cmd {
+    /// Run a scenario (default: the paper's) and leave DIR/recording.mcap,
+    /// DIR/summary.json and DIR/logs/.
+    Run(RunCmd),
+    /// Validate a scenario without starting anything.
+    Check {
+        /// Scenario TOML (default: the embedded paper scenario).
+        scenario: Option<PathBuf>,
+    },
+    /// List a recording's channels, schemas, counts, rates, time span, gaps.
+    Inspect {
+        /// The MCAP file.
+        recording: PathBuf,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Debug, clap::Args)]
+struct RunCmd {
+    /// Scenario TOML (default: the embedded `scenarios/paper.toml`).
+    scenario: Option<PathBuf>,
+    /// Output directory (default: runs/<scenario>-<unix time>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// lockstep: deterministic, as fast as the machine allows; realtime: every
+    /// process on its own wall-clock rate.
+    #[arg(long, value_enum, default_value = "lockstep")]
+    mode: Mode,
+    /// Seed of every random generator (overrides the scenario's).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Simulated duration in seconds (overrides the scenario's).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Directory holding the service binaries (default: next to `shoal`).
+    #[arg(long)]
+    bin_dir: Option<PathBuf>,
+    /// Longest a lockstep tick may take before the run is declared hung, s.
+    #[arg(long, default_value_t = 30.0)]
+    tick_timeout: f64,
+    /// No progress bar and no closing table.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+fn load_scenario(path: &Option<PathBuf>) -> anyhow::Result<Scenario> {
+    match path {
+        Some(p) => {
+            Scenario::from_file(p).with_context(|| format!("scenario {} refused", p.display()))
+        }
+        None => Scenario::paper().context("the embedded paper scenario is invalid"),
+    }
+}
+
+fn cmd_run(cmd: RunCmd) -> anyhow::Result<()> {
+    let mut scenario = load_scenario(&cmd.scenario)?;
+    if let Some(s) = cmd.seed {
+        scenario.seed = s;
+    }
+    if let Some(d) = cmd.duration {
+        scenario.duration_s = d;
+    }
+    scenario.validate().context("scenario refused")?;
+    check::check(&scenario).context("scenario refused")?;
+    let bin_dir = match cmd.bin_dir {
+        Some(d) => d,
+        None => std::env::current_exe()?
+            .parent()
+            .map(PathBuf::from)
+            .context("cannot locate the service binaries")?,
+    };
+    let out = cmd.out.unwrap_or_else(|| run::default_out(&scenario));
+    if out.join("recording.mcap").exists() {
+        anyhow::bail!(
+            "{} already holds a recording; choose another --out (nothing was overwritten)",
+            out.display()
+        );
+    }
+    let opts = run::RunOptions {
+        scenario: scenario.clone(),
+        out: out.clone(),
+        mode: cmd.mode,
+        bin_dir,
+        progress: !cmd.quiet,
+        tick_timeout: Duration::from_secs_f64(cmd.tick_timeout.max(0.1)),
+    };
+    let outcome = run::run(&opts)?;
+    let rec = recordings::Recording::open(&outcome.recording)?;
+    let summary = summary::summarize(&scenario, &rec, &outcome, cmd.mode.as_str());
+    let path = out.join("summary.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    if !cmd.quiet {
+        print_table(&summary);
+    }
+    println!("{}", out.display());
+    Ok(())
+}
+
+fn print_table(s: &serde_json::Value) {
+    let f = |p: &str| s.pointer(p).and_then(|v| v.as_f64()).unwrap_or(f64::NAN);
+    let safe = f("/safety/safe_distance_m");
+    let min_pair = f("/safety/min_pair_distance_m");
+    let collisions = f("/safety/collisions");
+    let mark = |ok: bool| if ok { "pass" } else { "FAIL" };
+    eprintln!(
+        "  run              {} ({}), {:.1} s simulated in {:.1} s ({:.1}x real time)",
+        s["scenario"].as_str().unwrap_or(""),
+        s["mode"].as_str().unwrap_or(""),
+        f("/sim_time_s"),
+        f("/wall_time_s"),
+        f("/real_time_factor")
+    );
+    eprintln!(
+        "  collisions       {collisions:.0}  [{}]",
+        mark(collisions == 0.0)
+    );
+    eprintln!(
+        "  min pair dist    {min_pair:.2} m ({}) vs safe {safe:.2} m  [{}]",
+        s.pointer("/safety/min_pair")
+            .and_then(|v| v.as_str())
+            .unwrap_or(""),
+        mark(min_pair >= safe)
+    );
+    eprintln!(
+        "  min clearance    {:.2} m to obstacles",
+        f("/safety/min_obstacle_clearance_m")
+    );
+    eprintln!(
+        "  slot error rms   before {:.2} m, during {:.2} m, after {:.2} m",
+        f("/formation/slot_error_rms_m/before"),
+        f("/formation/slot_error_rms_m/during"),
+        f("/formation/slot_error_rms_m/after")
+    );
+    eprintln!(
+        "  recording        {:.0} messages, {:.0} dropped",
+        f("/recording/messages"),
+        f("/recording/dropped")
+    );
+}
+
+fn cmd_inspect(path: PathBuf, json: bool) -> anyhow::Result<()> {
+    let rec = recordings::Recording::open(&path)?;
+    let report = rec.inspect();
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    println!(
+        "{}: {} messages, {:.3} s .. {:.3} s{}",
+        report.path,
+        report.messages,
+        report.start_s,
+        report.end_s,
+        if report.truncated {
+            "  [TRUNCATED: read up to the last complete chunk]"
+        } else {
+            ""
+        }
+    );
+    println!(
+        "{:<26} {:<20} {:>8} {:>9} {:>6} {:>9}",
+        "topic", "schema", "count", "rate Hz", "gaps", "max gap s"
+    );
+    for c in &report.channels {
+        println!(
+            "{:<26} {:<20} {:>8} {:>9.2} {:>6} {:>9.3}",
+            c.topic, c.schema, c.messages, c.rate_hz, c.gaps, c.max_interval_s
+        );
+    }
+    if let Some(m) = report.metadata.get("shoal.run") {
+        println!(
+            "run: scenario {} seed {} mode {}",
+            m.get("scenario").map_or("?", String::as_str),
+            m.get("seed").map_or("?", String::as_str),
+            m.get("mode").map_or("?", String::as_str)
+        );
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    shoal_runtime::init_tracing();
+    let cli = Cli::parse();
+    let result = match cli.cmd {
+        Cmd::Run(cmd) => cmd_run(cmd),
+        Cmd::Check { scenario } => load_scenario(&scenario).and_then(|s| {
+            check::check(&s)?;
+            println!(
+                "{}: ok ({} vehicles, {} processes)",
+                s.name,
+                s.vehicles.len(),
+                s.processes().len()
+            );
+            Ok(())
+        }),
+        Cmd::Inspect { recording, json } => cmd_inspect(recording, json),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

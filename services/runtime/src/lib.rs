@@ -31,6 +31,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod convert;
 pub mod domain;
 pub mod latency;
 pub mod ports;

@@ -1,0 +1,164 @@
+//! Spawning, watching, stopping and reaping a run's processes.
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use shoal_scenario::ProcessSpec;
+
+use crate::sys::{self, ExitInfo};
+
+/// One child process.
+#[derive(Debug)]
+pub struct ChildProc {
+    /// What it is.
+    pub spec: ProcessSpec,
+    /// Its pid.
+    pub pid: i32,
+    /// Where its stderr goes.
+    pub log: PathBuf,
+    /// How it ended, once reaped.
+    pub exit: Option<ExitInfo>,
+}
+
+/// Every child of a run.
+#[derive(Debug, Default)]
+pub struct Supervisor {
+    children: Vec<ChildProc>,
+    by_pid: HashMap<i32, usize>,
+    /// When set, exits are expected (the run is being stopped).
+    stopping: bool,
+}
+
+/// A child that ended while the run needed it.
+#[derive(Debug, Clone)]
+pub struct Death {
+    /// `vehicle/kind`.
+    pub label: String,
+    /// How it ended.
+    pub exit: ExitInfo,
+    /// The last lines of its log.
+    pub log_tail: String,
+}
+
+impl Supervisor {
+    /// Spawns one child with the given arguments; stderr and stdout go to `log`.
+    pub fn spawn(
+        &mut self,
+        spec: &ProcessSpec,
+        binary: &Path,
+        args: &[String],
+        log: &Path,
+    ) -> std::io::Result<()> {
+        let out = File::create(log)?;
+        let err = out.try_clone()?;
+        let mut cmd = Command::new(binary);
+        cmd.args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::from(out))
+            .stderr(Stdio::from(err));
+        sys::die_with_parent(&mut cmd);
+        let child = cmd.spawn()?;
+        let pid = child.id() as i32;
+        // The handle is dropped without waiting: children are reaped with wait4.
+        drop(child);
+        self.by_pid.insert(pid, self.children.len());
+        self.children.push(ChildProc {
+            spec: spec.clone(),
+            pid,
+            log: log.to_path_buf(),
+            exit: None,
+        });
+        Ok(())
+    }
+
+    /// All children.
+    pub fn children(&self) -> &[ChildProc] {
+        &self.children
+    }
+
+    /// Reaps every child that has exited; returns the ones that died while
+    /// the run still needed them.
+    pub fn reap(&mut self) -> Vec<Death> {
+        let mut deaths = Vec::new();
+        while let Some((pid, info)) = sys::reap_any() {
+            if let Some(&i) = self.by_pid.get(&pid) {
+                let c = &mut self.children[i];
+                c.exit = Some(info);
+                if !self.stopping {
+                    deaths.push(Death {
+                        label: c.spec.label(),
+                        exit: info,
+                        log_tail: tail(&c.log, 12),
+                    });
+                }
+            }
+        }
+        deaths
+    }
+
+    /// Number of children not yet reaped.
+    pub fn running(&self) -> usize {
+        self.children.iter().filter(|c| c.exit.is_none()).count()
+    }
+
+    /// Marks the run as stopping: exits from now on are expected.
+    pub fn begin_stop(&mut self) {
+        self.stopping = true;
+    }
+
+    /// Sends a signal to the children selected by `pick`.
+    pub fn signal(&self, sig: i32, pick: impl Fn(&ChildProc) -> bool) {
+        for c in &self.children {
+            if c.exit.is_none() && pick(c) {
+                sys::send_signal(c.pid, sig);
+            }
+        }
+    }
+
+    /// Waits until the selected children have exited, or `timeout`; returns
+    /// true if they all did.
+    pub fn wait_for(&mut self, timeout: Duration, pick: impl Fn(&ChildProc) -> bool) -> bool {
+        let start = Instant::now();
+        loop {
+            self.reap();
+            if self
+                .children
+                .iter()
+                .filter(|c| pick(c))
+                .all(|c| c.exit.is_some())
+            {
+                return true;
+            }
+            if start.elapsed() > timeout {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// Stops everything: SIGTERM the selected group first (the recorder,
+    /// which must finish its file), then the rest, then SIGKILL whatever is
+    /// left after the grace period. Every child is reaped.
+    pub fn stop_all(&mut self, first: impl Fn(&ChildProc) -> bool + Copy, grace: Duration) {
+        self.begin_stop();
+        self.signal(libc::SIGTERM, first);
+        if !self.wait_for(grace * 6, first) {
+            self.signal(libc::SIGKILL, first);
+        }
+        self.signal(libc::SIGTERM, |_| true);
+        if !self.wait_for(grace, |_| true) {
+            self.signal(libc::SIGKILL, |_| true);
+            self.wait_for(Duration::from_secs(5), |_| true);
+        }
+    }
+}
+
+/// The last `n` lines of a file.
+pub fn tail(path: &Path, n: usize) -> String {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let lines: Vec<&str> = text.lines().collect();
+    lines[lines.len().saturating_sub(n)..].join("\n")
+}

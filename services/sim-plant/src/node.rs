@@ -1,0 +1,108 @@
+//! Wiring of the plant library to its channels.
+
+use anyhow::Context;
+use ipc_types::{Channel, Nav, Sample, Thrust, Truth};
+use nalgebra::{UnitQuaternion, Vector3, Vector6};
+use shoal_runtime::convert::{arr, seed_for, wxyz};
+use shoal_runtime::ports::Origin;
+use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use shoal_scenario::Scenario;
+use sim_plant::nav::{NavConfig, NavSensor};
+use sim_plant::{Plant, PlantConfig, PlantState};
+
+pub struct PlantTask {
+    plant: Plant,
+    nav: NavSensor,
+    is_leader: bool,
+    thrust_in: Subscriber<Thrust>,
+    truth_out: Publisher<Truth>,
+    nav_out: Publisher<Nav>,
+    tau: Vector6<f64>,
+    thrust_origin_mono_ns: u64,
+    thrust_applied_mono_ns: u64,
+    period_s: f64,
+}
+
+impl PlantTask {
+    pub fn new(rt: &Runtime, scenario: &Scenario) -> anyhow::Result<Self> {
+        let me = &rt.args().vehicle;
+        let index = scenario
+            .vehicle_index(me)
+            .context("vehicle not in scenario")?;
+        let spec = &scenario.vehicles[index];
+        let cfg: PlantConfig = scenario.section("plant")?;
+        let nav_cfg: NavConfig = scenario.section("nav")?;
+        let (p, yaw) = scenario.start_poses()[me];
+        let initial = PlantState::at_rest(
+            Vector3::from(p),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+        );
+        let run = &rt.args().run_id;
+        let lim = ChannelLimits::vehicle();
+        Ok(Self {
+            plant: Plant::new(&cfg, initial)?,
+            nav: NavSensor::new(&nav_cfg, seed_for(scenario.seed, index, 1))?,
+            is_leader: spec.parent.is_none(),
+            thrust_in: rt.subscriber(
+                &ipc_types::service_name(run, me, Channel::Thrust),
+                &lim,
+                4,
+            )?,
+            truth_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Truth), &lim)?,
+            nav_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Nav), &lim)?,
+            tau: Vector6::zeros(),
+            thrust_origin_mono_ns: 0,
+            thrust_applied_mono_ns: 0,
+            period_s: 1.0 / scenario.rates.plant_hz,
+        })
+    }
+}
+
+impl Task for PlantTask {
+    fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        if let Some(t) = self.thrust_in.latest(ctx)? {
+            self.tau = Vector6::from(t.tau);
+            self.thrust_origin_mono_ns = t.header.origin_mono_ns;
+            self.thrust_applied_mono_ns = shoal_runtime::mono_ns();
+        }
+        let applied = self.plant.saturate(&self.tau);
+        let s = *self.plant.state();
+        let (r, p, y) = s.euler_rpy();
+        let mut truth = Truth::zeroed();
+        truth.position_ned_m = arr(&s.position_ned_m);
+        truth.q_body_to_ned_wxyz = wxyz(&s.attitude);
+        truth.euler_rpy_rad = [r, p, y];
+        truth.velocity_body_mps = [s.nu[0], s.nu[1], s.nu[2]];
+        truth.rates_body_radps = [s.nu[3], s.nu[4], s.nu[5]];
+        truth.tau_applied = applied.into();
+        truth.thrust_origin_mono_ns = self.thrust_origin_mono_ns;
+        truth.thrust_applied_mono_ns = self.thrust_applied_mono_ns;
+        let here = Origin::here(ctx);
+        self.truth_out.publish(truth, ctx, here)?;
+
+        let m = self.nav.measure(&s, self.is_leader);
+        let (r, p, y) = m.attitude.euler_angles();
+        let mut nav = Nav::zeroed();
+        nav.q_body_to_ned_wxyz = wxyz(&m.attitude);
+        nav.euler_rpy_rad = [r, p, y];
+        nav.rates_body_radps = arr(&m.rates_body_radps);
+        nav.velocity_body_mps = arr(&m.velocity_body_mps);
+        nav.depth_m = m.depth_m;
+        if let Some(pos) = m.position_ned_m {
+            nav.position_ned_m = arr(&pos);
+            nav.position_valid = 1;
+        }
+        self.nav_out.publish(nav, ctx, here)?;
+
+        let dt = match ctx.mode {
+            shoal_runtime::Mode::Lockstep => self.period_s,
+            shoal_runtime::Mode::Realtime => ctx.since_last_ns as f64 * 1e-9,
+        };
+        if dt > 0.0 {
+            self.plant
+                .advance(&self.tau, dt)
+                .map_err(TaskError::from_display)?;
+        }
+        Ok(())
+    }
+}

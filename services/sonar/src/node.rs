@@ -1,0 +1,83 @@
+//! Wiring of the sonar library to its channels.
+
+use anyhow::Context;
+use ipc_types::{Channel, RunChannel, Sample, World};
+use nalgebra::Isometry3;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use shoal_runtime::convert::{seed_for, world_pose};
+use shoal_runtime::ports::Origin;
+use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use shoal_scenario::Scenario;
+use sonar::{Obstacle, ObstacleField, Sonar, SonarConfig};
+
+pub struct SonarTask {
+    sonar: Sonar,
+    field: ObstacleField,
+    index: usize,
+    rng: ChaCha8Rng,
+    world_in: Subscriber<World>,
+    out: Publisher<ipc_types::Sonar>,
+    world: Option<World>,
+    others: Vec<Isometry3<f64>>,
+}
+
+impl SonarTask {
+    pub fn new(rt: &Runtime, scenario: &Scenario) -> anyhow::Result<Self> {
+        let me = &rt.args().vehicle;
+        let index = scenario
+            .vehicle_index(me)
+            .context("vehicle not in scenario")?;
+        let cfg: SonarConfig = scenario.section("sonar")?;
+        let obstacles: Vec<Obstacle> = scenario.obstacles_as()?;
+        let run = &rt.args().run_id;
+        Ok(Self {
+            sonar: Sonar::new(&cfg)?,
+            field: ObstacleField::new(&obstacles)?,
+            index,
+            rng: ChaCha8Rng::seed_from_u64(seed_for(scenario.seed, index, 2)),
+            world_in: rt.subscriber(
+                &ipc_types::run_service_name(run, RunChannel::World),
+                &ChannelLimits::world(scenario.vehicles.len()),
+                2,
+            )?,
+            out: rt.publisher(
+                &ipc_types::service_name(run, me, Channel::Sonar),
+                &ChannelLimits::vehicle(),
+            )?,
+            world: None,
+            others: Vec::with_capacity(scenario.vehicles.len()),
+        })
+    }
+}
+
+impl Task for SonarTask {
+    fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        if let Some(w) = self.world_in.latest(ctx)? {
+            self.world = Some(w);
+        }
+        let Some(w) = &self.world else {
+            return Ok(());
+        };
+        let pose = world_pose(&w.vehicles[self.index]);
+        self.others.clear();
+        for (i, v) in w.vehicles[..w.count as usize].iter().enumerate() {
+            if i != self.index {
+                self.others.push(world_pose(v));
+            }
+        }
+        let scan = self
+            .sonar
+            .scan(&self.field, &pose, &self.others, &mut self.rng);
+        let mut s = ipc_types::Sonar::zeroed();
+        s.ranges_m = scan.ranges_m;
+        s.azimuth_rad = scan.azimuth_rad;
+        s.elevation_rad = scan.elevation_rad;
+        for (d, v) in s.valid.iter_mut().zip(scan.valid) {
+            *d = u8::from(v);
+        }
+        s.count = scan.count as u32;
+        self.out.publish(s, ctx, Origin::here(ctx))?;
+        Ok(())
+    }
+}
