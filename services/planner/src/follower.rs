@@ -1,0 +1,653 @@
+//! The follower: slot in its parent's frame from vision, shifted for obstacles (eqs. 4-9),
+//! smoothed by an observer, with a defined behaviour when the parent is lost.
+
+use nalgebra::{Isometry3, Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
+use serde::{Deserialize, Serialize};
+
+use crate::frames::{from_level, to_level, wrap, yaw_of};
+use crate::observer::{FixOutcome, ObserverParams, ParentObserver};
+use crate::shift::{beam_vector, Displacement, Shift, SlotFilter};
+use crate::types::{
+    cfg_err, check_finite, check_nonneg, check_pos, Mode, PlannerError, PlannerOutput,
+    PlannerState, SonarReturns, Target,
+};
+
+/// Remembered obstacle points (odometry frame).
+pub const MEMORY_CAPACITY: usize = 128;
+/// Own-pose history kept to place late vision fixes.
+const HISTORY_CAPACITY: usize = 64;
+
+/// Follower planner configuration (`[follower]` in a scenario; the slot and `d_a_m`/`d_b_m`
+/// are per vehicle).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FollowerConfig {
+    /// Nominal slot in the parent's level frame (FRD: forward, starboard, down), m.
+    /// Default `[-8, -4, 0]`: 8 m behind, 4 m to port.
+    pub slot_in_parent_m: [f64; 3],
+    /// Safe distance `D_min` of eqs. (7)-(8), m (default 2).
+    pub d_min_m: f64,
+    /// `D_a` of eq. (4), m (default 2.5, > `D_min` as the paper requires). The paper's side
+    /// sign is applied: the slot's end point is `D_a/2` ahead for a port slot, behind for a
+    /// starboard one; a negative value reverses that.
+    pub d_a_m: f64,
+    /// `D_b` of eq. (5), m, signed, + = down (default 0): the slot ends `D_b/2` lower.
+    pub d_b_m: f64,
+    /// Smoothing coefficient β of eq. (9), per planner step, in (0, 1] (default 0.1: a time
+    /// constant of ~1 s at 10 Hz).
+    pub beta: f64,
+    /// Transducer position in the body frame, m (default `[0.8, 0, 0]`, as `sonar`).
+    pub sonar_mount_body_m: [f64; 3],
+    /// Returns closer than this to the parent estimate are taken as the parent's hull and
+    /// ignored, m (default 1.5).
+    pub parent_echo_radius_m: f64,
+    /// A remembered obstacle point is dropped once it is this far behind the follower, m
+    /// (default 3: forward beams no longer see an obstacle the follower is passing).
+    pub memory_behind_m: f64,
+    /// ... or this old, s (default 60).
+    pub memory_max_age_s: f64,
+    /// The parent estimate is stale after this long without a fused fix, s (default 0.5).
+    pub stale_after_s: f64,
+    /// Coasting: after going stale, follow the prediction while slowing to a stop over this
+    /// time, then hold, s (default 4).
+    pub coast_s: f64,
+    /// Consecutive fused fixes needed to resume tracking after the parent was lost (default 3).
+    pub reacquire_count: u32,
+    /// Observer: parent acceleration noise density, m/s² (default 0.1).
+    pub accel_noise_mps2: f64,
+    /// Observer: parent heading acceleration noise density, rad/s² (default 0.02).
+    pub yaw_accel_noise_radps2: f64,
+    /// Floor on the fix position noise, 1σ, m (default 0.05).
+    pub pose_noise_min_m: f64,
+    /// Floor on the fix heading noise, 1σ, rad (default 0.02).
+    pub yaw_noise_min_rad: f64,
+    /// Fix position noise used when the fix's covariance is unusable, 1σ, m (default 0.3).
+    pub pose_noise_default_m: f64,
+    /// Chi-square gate on fixes (3 dof; default 16.3 ≈ 99.9 %).
+    pub gate_chi2: f64,
+    /// Rejected fixes in a row after which the observer restarts (default 3).
+    pub max_rejections: u32,
+}
+
+impl Default for FollowerConfig {
+    fn default() -> Self {
+        Self {
+            slot_in_parent_m: [-8.0, -4.0, 0.0],
+            d_min_m: 2.0,
+            d_a_m: 2.5,
+            d_b_m: 0.0,
+            beta: 0.1,
+            sonar_mount_body_m: [0.8, 0.0, 0.0],
+            parent_echo_radius_m: 1.5,
+            memory_behind_m: 3.0,
+            memory_max_age_s: 60.0,
+            stale_after_s: 0.5,
+            coast_s: 4.0,
+            reacquire_count: 3,
+            accel_noise_mps2: 0.1,
+            yaw_accel_noise_radps2: 0.02,
+            pose_noise_min_m: 0.05,
+            yaw_noise_min_rad: 0.02,
+            pose_noise_default_m: 0.3,
+            gate_chi2: 16.27,
+            max_rejections: 3,
+        }
+    }
+}
+
+impl FollowerConfig {
+    /// Checks every key; the error names the first bad one (`follower.<key>`).
+    pub fn validate(&self) -> Result<(), PlannerError> {
+        for (i, v) in self.slot_in_parent_m.iter().enumerate() {
+            check_finite(&format!("follower.slot_in_parent_m[{i}]"), *v)?;
+        }
+        let s = self.slot_in_parent_m;
+        if (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt() < self.d_min_m {
+            return Err(cfg_err(
+                "follower.slot_in_parent_m",
+                format!(
+                    "is closer to the parent than d_min_m ({}), got {s:?}",
+                    self.d_min_m
+                ),
+            ));
+        }
+        check_pos("follower.d_min_m", self.d_min_m)?;
+        check_finite("follower.d_a_m", self.d_a_m)?;
+        check_finite("follower.d_b_m", self.d_b_m)?;
+        if !(self.beta.is_finite() && self.beta > 0.0 && self.beta <= 1.0) {
+            return Err(cfg_err(
+                "follower.beta",
+                format!("must be in (0, 1], got {}", self.beta),
+            ));
+        }
+        for (i, v) in self.sonar_mount_body_m.iter().enumerate() {
+            check_finite(&format!("follower.sonar_mount_body_m[{i}]"), *v)?;
+        }
+        check_nonneg("follower.parent_echo_radius_m", self.parent_echo_radius_m)?;
+        check_nonneg("follower.memory_behind_m", self.memory_behind_m)?;
+        check_pos("follower.memory_max_age_s", self.memory_max_age_s)?;
+        check_pos("follower.stale_after_s", self.stale_after_s)?;
+        check_nonneg("follower.coast_s", self.coast_s)?;
+        if self.reacquire_count == 0 {
+            return Err(cfg_err(
+                "follower.reacquire_count",
+                "must be >= 1, got 0".to_string(),
+            ));
+        }
+        check_pos("follower.accel_noise_mps2", self.accel_noise_mps2)?;
+        check_pos(
+            "follower.yaw_accel_noise_radps2",
+            self.yaw_accel_noise_radps2,
+        )?;
+        check_pos("follower.pose_noise_min_m", self.pose_noise_min_m)?;
+        check_pos("follower.yaw_noise_min_rad", self.yaw_noise_min_rad)?;
+        check_pos("follower.pose_noise_default_m", self.pose_noise_default_m)?;
+        check_pos("follower.gate_chi2", self.gate_chi2)?;
+        if self.max_rejections == 0 {
+            return Err(cfg_err(
+                "follower.max_rejections",
+                "must be >= 1, got 0".to_string(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One vision fix of the parent (the `leader_pose` channel).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseMeasurement {
+    /// Time the image was taken, s (simulation time).
+    pub t_s: f64,
+    /// The parent's pose in the follower's body frame (eq. 3).
+    pub parent_in_body: Isometry3<f64>,
+    /// Covariance of `[position, rotation vector]`, body frame.
+    pub covariance: Matrix6<f64>,
+    /// False if camera-pose could not solve; such a fix is never used.
+    pub valid: bool,
+}
+
+/// One follower planner step's inputs: the vehicle's own sensors, plus what is new.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FollowerInput {
+    /// Simulation time, s.
+    pub t_s: f64,
+    /// Own attitude from the AHRS, body→NED. Its heading is used only differentially.
+    pub attitude: UnitQuaternion<f64>,
+    /// Own body velocity `[u, v, w, p, q, r]` (DVL + gyros).
+    pub nu: Vector6<f64>,
+    /// Own depth, m.
+    pub depth_m: f64,
+    /// A new vision fix this step, if any.
+    pub pose: Option<PoseMeasurement>,
+    /// A new scan this step, if any.
+    pub sonar: Option<SonarReturns>,
+}
+
+/// The parent as the observer sees it, in the follower's level frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParentEstimate {
+    /// Parent position, level frame, m.
+    pub position_m: Vector3<f64>,
+    /// Parent velocity over ground, level-frame axes, m/s.
+    pub velocity_mps: Vector3<f64>,
+    /// Parent heading minus own heading, rad.
+    pub yaw_rel_rad: f64,
+    /// Parent turn rate, rad/s.
+    pub yaw_rate_radps: f64,
+    /// 1σ position uncertainty, m.
+    pub position_std_m: f64,
+    /// Time since the last fused fix, s.
+    pub age_s: f64,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct OwnPose {
+    t: f64,
+    pos: Vector3<f64>,
+    att: UnitQuaternion<f64>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct MemPoint {
+    t: f64,
+    pos: Vector3<f64>,
+}
+
+/// A frozen target the follower moves to without a fresh parent estimate.
+#[derive(Debug, Clone, Copy)]
+struct Anchor {
+    t0: f64,
+    pos: Vector3<f64>,
+    vel: Vector3<f64>,
+    yaw: f64,
+}
+
+/// The follower planner (paper sec. 3 and fig. 4).
+///
+/// Each [`FollowerPlanner::step`]:
+/// 1. dead-reckons the follower in its odometry frame (DVL + AHRS, depth sensor);
+/// 2. places the new sonar returns in that frame and remembers them until they are
+///    `memory_behind_m` behind (so the slot stays shifted while the follower passes an
+///    obstacle its forward beams no longer see);
+/// 3. runs the observer ([`crate::observer`]) on the new vision fix;
+/// 4. in the parent's level frame (eq. 6, with the relative heading from vision): eq. (7)
+///    over the remembered points, eq. (8) for the shifted slot, eq. (9) to smooth it;
+/// 5. returns the slot in the follower's level frame, its velocity over ground
+///    (feed-forward) and the parent's heading relative to its own.
+///
+/// Lost parent: the estimate is *stale* `stale_after_s` after the last fused fix. Then
+/// **Coasting**: the target continues along the last prediction at the last target depth
+/// and heading, decelerating linearly to a stop over `coast_s` (it travels `v·coast_s/2`).
+/// Then **ParentLost**: hold that point, depth and heading. A vision fix during Coasting
+/// resumes tracking at once; after ParentLost (and at start) the observer restarts and
+/// tracking resumes after `reacquire_count` consecutive fused fixes. `parent_age_s` and
+/// `parent_estimate_valid` always say how old the estimate is.
+#[derive(Debug, Clone)]
+pub struct FollowerPlanner {
+    cfg: FollowerConfig,
+    disp: Displacement,
+    mount: Vector3<f64>,
+    observer: ParentObserver,
+    filter: SlotFilter,
+    t_start: Option<f64>,
+    t_prev: f64,
+    odo: Vector3<f64>,
+    history: Vec<OwnPose>,
+    memory: Vec<MemPoint>,
+    t_last_fix: Option<f64>,
+    consecutive_fixes: u32,
+    mode: Mode,
+    anchor: Option<Anchor>,
+    last_shift: Shift,
+    last_target_odo: Option<(Vector3<f64>, Vector3<f64>, f64)>,
+}
+
+impl FollowerPlanner {
+    /// Validates the configuration and pre-allocates the buffers.
+    pub fn new(cfg: &FollowerConfig) -> Result<Self, PlannerError> {
+        cfg.validate()?;
+        let slot = Vector3::from(cfg.slot_in_parent_m);
+        let disp = Displacement {
+            slot,
+            d_a: cfg.d_a_m,
+            d_b: cfg.d_b_m,
+        };
+        let mut filter = SlotFilter::new(cfg.beta);
+        filter.reset(slot);
+        Ok(Self {
+            disp,
+            mount: Vector3::from(cfg.sonar_mount_body_m),
+            observer: ParentObserver::new(ObserverParams {
+                accel_noise_mps2: cfg.accel_noise_mps2,
+                yaw_accel_noise_radps2: cfg.yaw_accel_noise_radps2,
+                gate_chi2: cfg.gate_chi2,
+                max_rejections: cfg.max_rejections,
+                initial_speed_std_mps: 1.0,
+            }),
+            filter,
+            t_start: None,
+            t_prev: 0.0,
+            odo: Vector3::zeros(),
+            history: Vec::with_capacity(HISTORY_CAPACITY),
+            memory: Vec::with_capacity(MEMORY_CAPACITY),
+            t_last_fix: None,
+            consecutive_fixes: 0,
+            mode: Mode::ParentLost,
+            anchor: None,
+            last_shift: Shift {
+                slot,
+                lambda: 0.0,
+                delta_min: f64::INFINITY,
+                y_dc: None,
+                active: false,
+            },
+            last_target_odo: None,
+            cfg: cfg.clone(),
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &FollowerConfig {
+        &self.cfg
+    }
+
+    /// The displacement segment of this follower (eqs. 4-5).
+    pub fn displacement(&self) -> &Displacement {
+        &self.disp
+    }
+
+    /// Number of remembered obstacle points.
+    pub fn remembered_points(&self) -> usize {
+        self.memory.len()
+    }
+
+    /// The observer's parent estimate in the current level frame, if initialised.
+    pub fn parent_estimate(&self) -> Option<ParentEstimate> {
+        if !self.observer.initialized() {
+            return None;
+        }
+        let own = self.history.last()?;
+        let yaw = yaw_of(&own.att);
+        Some(ParentEstimate {
+            position_m: to_level(yaw, &(self.observer.position() - own.pos)),
+            velocity_mps: to_level(yaw, &self.observer.velocity()),
+            yaw_rel_rad: wrap(self.observer.yaw() - yaw),
+            yaw_rate_radps: self.observer.yaw_rate(),
+            position_std_m: self.observer.position_std(),
+            age_s: self.t_last_fix.map_or(f64::INFINITY, |t| own.t - t),
+        })
+    }
+
+    fn check_input(input: &FollowerInput) -> Result<(), PlannerError> {
+        let q = input.attitude.quaternion();
+        let finite = |what, ok: bool| {
+            if ok {
+                Ok(())
+            } else {
+                Err(PlannerError::NonFiniteInput { what })
+            }
+        };
+        finite("t_s", input.t_s.is_finite())?;
+        finite("attitude", q.coords.iter().all(|x| x.is_finite()))?;
+        finite("nu", input.nu.iter().all(|x| x.is_finite()))?;
+        finite("depth_m", input.depth_m.is_finite())?;
+        if let Some(p) = &input.pose {
+            if p.valid {
+                let pq = p.parent_in_body.rotation.quaternion();
+                finite(
+                    "pose",
+                    p.t_s.is_finite()
+                        && p.parent_in_body
+                            .translation
+                            .vector
+                            .iter()
+                            .all(|x| x.is_finite())
+                        && pq.coords.iter().all(|x| x.is_finite()),
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The own pose at (or just before) `t`, from the history.
+    fn own_at(&self, t: f64) -> Option<OwnPose> {
+        self.history
+            .iter()
+            .rev()
+            .find(|h| h.t <= t + 1e-9)
+            .or_else(|| self.history.first())
+            .copied()
+    }
+
+    fn fix_noise(&self, att: &UnitQuaternion<f64>, cov: &Matrix6<f64>) -> (Matrix3<f64>, f64) {
+        let r = att.to_rotation_matrix();
+        let usable = cov.iter().all(|x| x.is_finite()) && (0..6).all(|i| cov[(i, i)] >= 0.0);
+        let floor = self.cfg.pose_noise_min_m.powi(2);
+        let (pos, yaw_var) = if usable {
+            let p: Matrix3<f64> = cov.fixed_view::<3, 3>(0, 0).into_owned();
+            let o: Matrix3<f64> = cov.fixed_view::<3, 3>(3, 3).into_owned();
+            let p_ned = r * p * r.transpose();
+            let o_ned = r * o * r.transpose();
+            (p_ned, o_ned[(2, 2)])
+        } else {
+            (
+                Matrix3::identity() * self.cfg.pose_noise_default_m.powi(2),
+                (5f64.to_radians()).powi(2),
+            )
+        };
+        (
+            pos + Matrix3::identity() * floor,
+            yaw_var.max(0.0) + self.cfg.yaw_noise_min_rad.powi(2),
+        )
+    }
+
+    /// One planner step. On error the state is unchanged.
+    pub fn step(&mut self, input: &FollowerInput) -> Result<PlannerOutput, PlannerError> {
+        Self::check_input(input)?;
+        let t = input.t_s;
+        let first = self.t_start.is_none();
+        if !first && t < self.t_prev {
+            return Err(PlannerError::TimeWentBackwards {
+                previous_s: self.t_prev,
+                now_s: t,
+            });
+        }
+        let dt = if first {
+            0.0
+        } else {
+            (t - self.t_prev).min(1.0)
+        };
+        let t_start = *self.t_start.get_or_insert(t);
+        self.t_prev = t;
+
+        // 1. own odometry
+        let att = input.attitude;
+        let yaw_own = yaw_of(&att);
+        let v_own = att * input.nu.fixed_rows::<3>(0).into_owned();
+        self.odo.x += v_own.x * dt;
+        self.odo.y += v_own.y * dt;
+        self.odo.z = input.depth_m;
+        if self.history.len() == HISTORY_CAPACITY {
+            self.history.remove(0);
+        }
+        self.history.push(OwnPose {
+            t,
+            pos: self.odo,
+            att,
+        });
+
+        // 2. observer: predict, then the new fix
+        self.observer.predict(t);
+        let age_before = self.t_last_fix.map_or(f64::INFINITY, |tf| t - tf);
+        if let Some(pm) = input.pose {
+            if pm.valid {
+                let t_meas = pm.t_s.min(t);
+                let own = self.own_at(t_meas).unwrap_or(OwnPose {
+                    t,
+                    pos: self.odo,
+                    att,
+                });
+                let p_fix = own.pos + own.att * pm.parent_in_body.translation.vector;
+                let yaw_fix = yaw_of(&(own.att * pm.parent_in_body.rotation));
+                let (r_pos, yaw_var) = self.fix_noise(&own.att, &pm.covariance);
+                let lost = age_before > self.cfg.stale_after_s + self.cfg.coast_s;
+                let outcome = if !self.observer.initialized() || lost {
+                    let here = p_fix + v_own * (t - t_meas);
+                    self.observer
+                        .restart(t, &here, &r_pos, yaw_fix, yaw_var, &v_own);
+                    FixOutcome::Restarted
+                } else {
+                    self.observer
+                        .fuse(t_meas, &p_fix, &r_pos, yaw_fix, yaw_var, &v_own)
+                };
+                match outcome {
+                    FixOutcome::Accepted => {
+                        self.t_last_fix = Some(t_meas);
+                        self.consecutive_fixes += 1;
+                    }
+                    FixOutcome::Restarted => {
+                        self.t_last_fix = Some(t_meas);
+                        self.consecutive_fixes = 1;
+                    }
+                    FixOutcome::Rejected => self.consecutive_fixes = 0,
+                }
+            } else {
+                self.consecutive_fixes = 0;
+            }
+        }
+        let age = self.t_last_fix.map_or(t - t_start, |tf| t - tf);
+        let fresh = self.observer.initialized()
+            && self.t_last_fix.is_some()
+            && age <= self.cfg.stale_after_s;
+
+        // 3. sonar returns into the odometry frame, then forget what is behind
+        if let Some(scan) = &input.sonar {
+            let parent = fresh.then(|| self.observer.position());
+            for (d, az, el) in scan.returns() {
+                let p = self.odo + att * (self.mount + beam_vector(d, az, el));
+                if let Some(pp) = parent {
+                    if (p - pp).norm() < self.cfg.parent_echo_radius_m {
+                        continue;
+                    }
+                }
+                if self.memory.len() == MEMORY_CAPACITY {
+                    self.memory.remove(0);
+                }
+                self.memory.push(MemPoint { t, pos: p });
+            }
+        }
+        let (odo, behind, max_age) = (
+            self.odo,
+            self.cfg.memory_behind_m,
+            self.cfg.memory_max_age_s,
+        );
+        self.memory
+            .retain(|m| to_level(yaw_own, &(m.pos - odo)).x >= -behind && t - m.t <= max_age);
+
+        // 4. mode
+        let next = if fresh {
+            match self.mode {
+                Mode::ParentLost if self.consecutive_fixes < self.cfg.reacquire_count => {
+                    Mode::ParentLost
+                }
+                _ => Mode::Tracking,
+            }
+        } else if self.observer.initialized()
+            && matches!(self.mode, Mode::Tracking | Mode::Avoiding | Mode::Coasting)
+            && age <= self.cfg.stale_after_s + self.cfg.coast_s
+        {
+            Mode::Coasting
+        } else {
+            Mode::ParentLost
+        };
+
+        let (target_pos, target_vel, target_yaw, mode) = match next {
+            Mode::Tracking | Mode::Avoiding => {
+                if self.mode == Mode::ParentLost {
+                    // re-entering: restart the slot filter from the current shift
+                    self.filter.reset(self.last_shift.slot);
+                }
+                self.anchor = None;
+                self.track(dt)
+            }
+            Mode::Coasting => {
+                let anchor = match self.anchor {
+                    Some(a) if self.mode == Mode::Coasting => a,
+                    _ => {
+                        let (p, v, y) =
+                            self.last_target_odo
+                                .unwrap_or((self.odo, Vector3::zeros(), yaw_own));
+                        let a = Anchor {
+                            t0: t,
+                            pos: p,
+                            vel: Vector3::new(v.x, v.y, 0.0),
+                            yaw: y,
+                        };
+                        self.anchor = Some(a);
+                        a
+                    }
+                };
+                let big_t = self.cfg.coast_s;
+                let tau = (t - anchor.t0).clamp(0.0, big_t);
+                let (s, f) = if big_t > 0.0 {
+                    (tau - tau * tau / (2.0 * big_t), 1.0 - tau / big_t)
+                } else {
+                    (0.0, 0.0)
+                };
+                (
+                    anchor.pos + anchor.vel * s,
+                    anchor.vel * f,
+                    anchor.yaw,
+                    Mode::Coasting,
+                )
+            }
+            _ => {
+                let anchor = match self.anchor {
+                    Some(a) if self.mode == Mode::ParentLost => a,
+                    Some(a) if self.mode == Mode::Coasting => {
+                        let a = Anchor {
+                            t0: t,
+                            pos: a.pos + a.vel * (0.5 * self.cfg.coast_s),
+                            vel: Vector3::zeros(),
+                            yaw: a.yaw,
+                        };
+                        self.anchor = Some(a);
+                        a
+                    }
+                    _ => {
+                        let (pos, yaw) = match self.last_target_odo {
+                            Some((p, _, y)) => (p, y),
+                            None => (self.odo, yaw_own),
+                        };
+                        let a = Anchor {
+                            t0: t,
+                            pos,
+                            vel: Vector3::zeros(),
+                            yaw,
+                        };
+                        self.anchor = Some(a);
+                        a
+                    }
+                };
+                (anchor.pos, Vector3::zeros(), anchor.yaw, Mode::ParentLost)
+            }
+        };
+        self.mode = mode;
+
+        let target = Target {
+            position_m: to_level(yaw_own, &(target_pos - self.odo)),
+            velocity_mps: to_level(yaw_own, &target_vel),
+            yaw_rel_rad: wrap(target_yaw - yaw_own),
+        };
+        let state = PlannerState {
+            mode,
+            slot_nominal_m: self.disp.slot,
+            slot_shifted_m: self.last_shift.slot,
+            slot_filtered_m: self.filter.value().unwrap_or(self.disp.slot),
+            delta_min_m: self.last_shift.delta_min,
+            parent_age_s: age,
+            parent_estimate_valid: fresh,
+            avoiding: self.last_shift.active,
+            waypoint_index: 0,
+            waypoint_distance_m: 0.0,
+            track_offset_m: 0.0,
+        };
+        Ok(PlannerOutput { target, state })
+    }
+
+    /// Tracking: eqs. (6)-(9) in the parent's level frame; returns the target position,
+    /// velocity and heading in the odometry frame, and the mode.
+    fn track(&mut self, dt: f64) -> (Vector3<f64>, Vector3<f64>, f64, Mode) {
+        let p_parent = self.observer.position();
+        let v_parent = self.observer.velocity();
+        let yaw_parent = self.observer.yaw();
+        let r_parent = self.observer.yaw_rate();
+        // eq. (6): remembered returns in the parent's frame (rotation from vision)
+        let shift = self.disp.shift(
+            self.memory
+                .iter()
+                .map(|m| to_level(yaw_parent, &(m.pos - p_parent)).y),
+            self.cfg.d_min_m,
+        );
+        let prev = self.filter.value().unwrap_or(self.disp.slot);
+        let filtered = self.filter.update(&shift.slot); // eq. (9)
+        let slot_rate = if dt > 0.0 {
+            (filtered - prev) / dt
+        } else {
+            Vector3::zeros()
+        };
+        self.last_shift = shift;
+        let arm = from_level(yaw_parent, &filtered);
+        let pos = p_parent + arm;
+        let vel =
+            v_parent + Vector3::z().cross(&arm) * r_parent + from_level(yaw_parent, &slot_rate);
+        self.last_target_odo = Some((pos, vel, yaw_parent));
+        let returning = (filtered - self.disp.slot).norm() > 0.05;
+        let mode = if shift.active || returning {
+            Mode::Avoiding
+        } else {
+            Mode::Tracking
+        };
+        (pos, vel, yaw_parent, mode)
+    }
+}

@@ -1,0 +1,658 @@
+//! Choosing and checking `D_a` / `D_b` for every follower of a formation tree (paper sec. 3:
+//! "`D_a` is chosen so that when different AUVs move along these given trajectories inside
+//! the formation, the distances between them would always be no less than `D_min`"; "`D_b`
+//! is chosen for each follower in such a way that any displacement along the given
+//! trajectories within the formation does not cover the beacon's visibility area for other
+//! members of the group").
+//!
+//! # Model
+//! The check is geometric, in the leader's frame with every vehicle on the formation's
+//! heading (the steady formation). Follower `k`'s slot moves along its displacement segment
+//! `S_k + λ_k w_k`, `λ_k ∈ [0, 1]` ([`crate::shift::Displacement`]: `w_k` ends on its
+//! parent's track, `±D_a/2` along and `D_b/2` down). A vehicle's position is the sum of the
+//! segments along its chain of parents. Every follower reacts to its own sonar, so the `λ`
+//! are **independent**: the check covers every combination.
+//!
+//! * **Separation**: for each pair, the minimum over all `λ` of their distance is `≥ D_min`.
+//!   Shared ancestors cancel; what remains is the distance from the origin to a zonotope,
+//!   a small convex box-constrained least-squares problem solved exactly by coordinate
+//!   descent.
+//! * **Line of sight**: for each follower `j`, its parent `P` and any third vehicle `k`, the
+//!   distance from `k` to the segment `j → P` stays `≥ occlusion_radius_m` (hull radius plus
+//!   the beacons' spread). This is not convex; it is minimised by a coordinate search over
+//!   `λ ∈ {0, ¼, ½, ¾, 1}` from five starts (all 0, all 1, all ½, and the two sides at
+//!   opposite ends), after a bounding-box test that discards most triples.
+//! * **Visibility range**: `|j − P| ≤ visibility_range_m` at both ends of `j`'s segment.
+//!
+//! # Assignment
+//! [`assign_displacements`] visits followers by tree depth (then input order) and gives each
+//! the first candidate that keeps every constraint with the vehicles already placed,
+//! backtracking when one has none. Candidates, in order of preference: `D_b = 0`, then
+//! `±step, ±2·step, …` up to `2·max_depth_shift_m` (`+` = down first), and for each,
+//! `D_a = 1.25, 1.5, 2 × D_min` with the paper's side sign, then reversed. When no
+//! assignment exists the error names the follower, and the pair (or triple) and distance of
+//! its least-violating candidate.
+
+use std::collections::HashMap;
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::shift::Displacement;
+
+/// One follower of the formation tree.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FollowerSlot {
+    /// Vehicle name.
+    pub name: String,
+    /// Its parent (the leader or another follower).
+    pub parent: String,
+    /// Slot in the parent's frame, FRD, m.
+    pub slot_in_parent_m: [f64; 3],
+}
+
+/// Camera and geometry parameters of the check.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FormationParams {
+    /// Water visibility: a follower must stay within this of its parent, m (default 12).
+    pub visibility_range_m: f64,
+    /// A vehicle closer than this to a line of sight hides the beacons, m (default 0.6:
+    /// hull radius 0.25 plus beacon spread).
+    pub occlusion_radius_m: f64,
+    /// Largest vertical shift of one follower, `|D_b|/2`, m (default 3).
+    pub max_depth_shift_m: f64,
+    /// Step of the `D_b` candidates, m (default 1).
+    pub d_b_step_m: f64,
+}
+
+impl Default for FormationParams {
+    fn default() -> Self {
+        Self {
+            visibility_range_m: 12.0,
+            occlusion_radius_m: 0.6,
+            max_depth_shift_m: 3.0,
+            d_b_step_m: 1.0,
+        }
+    }
+}
+
+/// Why a formation or an assignment is refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FormationError {
+    /// A parameter is out of range.
+    #[error("formation: {0}")]
+    InvalidParam(String),
+    /// Two vehicles share a name.
+    #[error("formation: duplicate vehicle name {0}")]
+    DuplicateName(String),
+    /// A follower's parent is not in the formation.
+    #[error("formation: {follower} follows unknown vehicle {parent}")]
+    UnknownParent {
+        /// The follower.
+        follower: String,
+        /// Its missing parent.
+        parent: String,
+    },
+    /// The parent links do not reach the leader.
+    #[error("formation: the parent chain of {0} never reaches the leader (cycle)")]
+    Cycle(String),
+    /// The assignment has the wrong length.
+    #[error("formation: {got} displacements for {expected} followers")]
+    WrongLength {
+        /// Followers.
+        expected: usize,
+        /// Displacements given.
+        got: usize,
+    },
+    /// Two vehicles come closer than the safe distance.
+    #[error("{a} and {b} come within {distance_m:.2} m of each other along their displacement trajectories (safe distance {d_min_m} m)")]
+    TooClose {
+        /// One vehicle.
+        a: String,
+        /// The other.
+        b: String,
+        /// Their smallest distance, m.
+        distance_m: f64,
+        /// The safe distance, m.
+        d_min_m: f64,
+    },
+    /// A vehicle can hide a parent's beacons from its follower.
+    #[error("{occluder} comes within {clearance_m:.2} m of the line of sight from {observer} to its parent {parent} (needs {needed_m} m)")]
+    Occludes {
+        /// The follower whose view is blocked.
+        observer: String,
+        /// Its parent.
+        parent: String,
+        /// The vehicle in the way.
+        occluder: String,
+        /// Smallest distance to the line of sight, m.
+        clearance_m: f64,
+        /// Required, m.
+        needed_m: f64,
+    },
+    /// A follower's slot is beyond the water's visibility from its parent.
+    #[error("{follower} is up to {distance_m:.2} m from its parent {parent}, beyond the visibility range {visibility_m} m")]
+    OutOfSight {
+        /// The follower.
+        follower: String,
+        /// Its parent.
+        parent: String,
+        /// Largest distance along its displacement, m.
+        distance_m: f64,
+        /// Visibility, m.
+        visibility_m: f64,
+    },
+    /// A vertical shift exceeds `max_depth_shift_m`.
+    #[error(
+        "{follower}: vertical shift |d_b|/2 = {shift_m} m exceeds max_depth_shift_m {max_m} m"
+    )]
+    DepthShift {
+        /// The follower.
+        follower: String,
+        /// Its shift, m.
+        shift_m: f64,
+        /// Allowed, m.
+        max_m: f64,
+    },
+    /// No displacement works for a follower.
+    #[error("no D_a/D_b for {follower} keeps the formation safe; closest candidate: {cause}")]
+    Impossible {
+        /// The follower that could not be placed.
+        follower: String,
+        /// The violation of its least-bad candidate (names the pair and distance).
+        cause: Box<FormationError>,
+    },
+}
+
+/// The tree, indexed: vehicle 0 is the leader, vehicle `i + 1` is follower `i`.
+struct Tree {
+    names: Vec<String>,
+    /// parent vehicle index for each vehicle (leader: itself).
+    parent: Vec<usize>,
+    /// For each vehicle, follower indices (vehicle − 1) from the leader's child down to it.
+    chain: Vec<Vec<usize>>,
+    slots: Vec<Vector3<f64>>,
+    order: Vec<usize>,
+}
+
+fn build_tree(leader: &str, followers: &[FollowerSlot]) -> Result<Tree, FormationError> {
+    let mut index: HashMap<&str, usize> = HashMap::new();
+    index.insert(leader, 0);
+    for (i, f) in followers.iter().enumerate() {
+        if index.insert(f.name.as_str(), i + 1).is_some() {
+            return Err(FormationError::DuplicateName(f.name.clone()));
+        }
+        if !f.slot_in_parent_m.iter().all(|x| x.is_finite()) {
+            return Err(FormationError::InvalidParam(format!(
+                "{}: slot_in_parent_m must be finite, got {:?}",
+                f.name, f.slot_in_parent_m
+            )));
+        }
+    }
+    let n = followers.len() + 1;
+    let mut parent = vec![0; n];
+    for (i, f) in followers.iter().enumerate() {
+        parent[i + 1] =
+            *index
+                .get(f.parent.as_str())
+                .ok_or_else(|| FormationError::UnknownParent {
+                    follower: f.name.clone(),
+                    parent: f.parent.clone(),
+                })?;
+    }
+    let mut chain = vec![Vec::new(); n];
+    for v in 1..n {
+        let mut c = Vec::new();
+        let mut cur = v;
+        while cur != 0 {
+            if c.len() > n {
+                return Err(FormationError::Cycle(followers[v - 1].name.clone()));
+            }
+            c.push(cur - 1);
+            cur = parent[cur];
+        }
+        c.reverse();
+        chain[v] = c;
+    }
+    let mut order: Vec<usize> = (0..followers.len()).collect();
+    order.sort_by_key(|&i| chain[i + 1].len());
+    let mut names = vec![leader.to_string()];
+    names.extend(followers.iter().map(|f| f.name.clone()));
+    let mut slots = vec![Vector3::zeros()];
+    slots.extend(followers.iter().map(|f| Vector3::from(f.slot_in_parent_m)));
+    Ok(Tree {
+        names,
+        parent,
+        chain,
+        slots,
+        order,
+    })
+}
+
+/// Segment start `S_k` and direction `w_k` of follower `k`.
+fn segment(slot: &Vector3<f64>, d: (f64, f64)) -> Vector3<f64> {
+    let disp = Displacement {
+        slot: *slot,
+        d_a: d.0,
+        d_b: d.1,
+    };
+    disp.end() - slot
+}
+
+/// min over λ ∈ [0,1]ⁿ of |c + Σ λ_k w_k| (convex; cyclic coordinate descent).
+fn min_norm_box(c: &Vector3<f64>, cols: &[Vector3<f64>]) -> f64 {
+    let mut lambda = vec![0.0; cols.len()];
+    let mut r = *c;
+    for _ in 0..200 {
+        let mut moved = 0.0f64;
+        for (k, w) in cols.iter().enumerate() {
+            let ww = w.norm_squared();
+            if ww < 1e-18 {
+                continue;
+            }
+            let new = (lambda[k] - r.dot(w) / ww).clamp(0.0, 1.0);
+            let delta = new - lambda[k];
+            if delta != 0.0 {
+                r += w * delta;
+                lambda[k] = new;
+                moved = moved.max(delta.abs());
+            }
+        }
+        if moved < 1e-12 {
+            break;
+        }
+    }
+    r.norm()
+}
+
+fn point_segment_distance(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    let ab = b - a;
+    let l2 = ab.norm_squared();
+    let t = if l2 > 0.0 {
+        ((p - a).dot(&ab) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + ab * t)).norm()
+}
+
+struct Geometry<'a> {
+    tree: &'a Tree,
+    /// Per follower: `Some(w_k)` once assigned.
+    w: Vec<Option<Vector3<f64>>>,
+}
+
+impl Geometry<'_> {
+    fn assigned(&self, v: usize) -> bool {
+        v == 0 || self.w[v - 1].is_some()
+    }
+
+    fn wk(&self, k: usize) -> Vector3<f64> {
+        self.w[k].unwrap_or_else(Vector3::zeros)
+    }
+
+    /// Reachable axis-aligned box of vehicle `v`.
+    fn bbox(&self, v: usize) -> (Vector3<f64>, Vector3<f64>) {
+        let mut lo = Vector3::zeros();
+        let mut hi = Vector3::zeros();
+        for &k in &self.tree.chain[v] {
+            let s = self.tree.slots[k + 1];
+            let e = s + self.wk(k);
+            lo += s.inf(&e);
+            hi += s.sup(&e);
+        }
+        (lo, hi)
+    }
+
+    /// Smallest distance between vehicles `i` and `j` over all displacements.
+    fn pair_distance(&self, i: usize, j: usize) -> f64 {
+        let (ci, cj) = (&self.tree.chain[i], &self.tree.chain[j]);
+        let common = ci.iter().zip(cj.iter()).take_while(|(a, b)| a == b).count();
+        let mut c = Vector3::zeros();
+        let mut cols = Vec::with_capacity(ci.len() + cj.len());
+        for &k in &ci[common..] {
+            c += self.tree.slots[k + 1];
+            cols.push(self.wk(k));
+        }
+        for &k in &cj[common..] {
+            c -= self.tree.slots[k + 1];
+            cols.push(-self.wk(k));
+        }
+        min_norm_box(&c, &cols)
+    }
+
+    /// Smallest distance from `k` to the line of sight `j → parent(j)`.
+    fn sight_clearance(&self, j: usize, k: usize, radius: f64) -> f64 {
+        let p = self.tree.parent[j];
+        // bounding-box rejection
+        let (jl, jh) = self.bbox(j);
+        let (pl, ph) = self.bbox(p);
+        let (kl, kh) = self.bbox(k);
+        let (sl, sh) = (jl.inf(&pl), jh.sup(&ph));
+        let gap = (sl - kh).sup(&(kl - sh)).sup(&Vector3::zeros()).norm();
+        if gap >= radius {
+            return gap;
+        }
+        // variables: displacements below the ancestors that j, its parent and k share
+        let (cj, cp, ck) = (
+            &self.tree.chain[j],
+            &self.tree.chain[p],
+            &self.tree.chain[k],
+        );
+        let common = cp.iter().zip(ck.iter()).take_while(|(a, b)| a == b).count();
+        let mut vars: Vec<usize> = cj[common..].to_vec();
+        let nj = vars.len();
+        for &f in &ck[common..] {
+            if !vars.contains(&f) {
+                vars.push(f);
+            }
+        }
+        let n = vars.len();
+        let pos_of = |v: usize, lam: &[f64]| {
+            let mut acc = Vector3::zeros();
+            for &f in &self.tree.chain[v][common..] {
+                let l = vars.iter().position(|x| *x == f).map_or(0.0, |i| lam[i]);
+                acc += self.tree.slots[f + 1] + self.wk(f) * l;
+            }
+            acc
+        };
+        let eval =
+            |lam: &[f64]| point_segment_distance(&pos_of(k, lam), &pos_of(j, lam), &pos_of(p, lam));
+        let levels = [0.0, 0.25, 0.5, 0.75, 1.0];
+        let starts: [Box<dyn Fn(usize) -> f64>; 5] = [
+            Box::new(|_| 0.0),
+            Box::new(|_| 1.0),
+            Box::new(|_| 0.5),
+            Box::new(move |i| if i < nj { 1.0 } else { 0.0 }),
+            Box::new(move |i| if i < nj { 0.0 } else { 1.0 }),
+        ];
+        let mut best = f64::INFINITY;
+        let mut lam = vec![0.0; n];
+        for start in &starts {
+            for (i, l) in lam.iter_mut().enumerate() {
+                *l = start(i);
+            }
+            let mut cur = eval(&lam);
+            for _ in 0..10 {
+                let mut improved = false;
+                for i in 0..n {
+                    let keep = lam[i];
+                    let mut best_l = keep;
+                    for &l in &levels {
+                        lam[i] = l;
+                        let v = eval(&lam);
+                        if v < cur - 1e-12 {
+                            cur = v;
+                            best_l = l;
+                            improved = true;
+                        }
+                    }
+                    lam[i] = best_l;
+                }
+                if !improved {
+                    break;
+                }
+            }
+            best = best.min(cur);
+        }
+        best
+    }
+
+    /// Every constraint between follower vehicle `v` and the vehicles already assigned;
+    /// the worst violation as an error.
+    fn violations_of(
+        &self,
+        v: usize,
+        d_min: f64,
+        params: &FormationParams,
+    ) -> Option<(f64, FormationError)> {
+        let n = self.tree.names.len();
+        let name = |i: usize| self.tree.names[i].clone();
+        let mut worst: Option<(f64, FormationError)> = None;
+        let mut note = |deficit: f64, e: FormationError| {
+            if worst.as_ref().is_none_or(|(d, _)| deficit > *d) {
+                worst = Some((deficit, e));
+            }
+        };
+        // visibility range to its parent
+        let p = self.tree.parent[v];
+        let s = self.tree.slots[v];
+        let far = s.norm().max((s + self.wk(v - 1)).norm());
+        if far > params.visibility_range_m {
+            note(
+                far - params.visibility_range_m,
+                FormationError::OutOfSight {
+                    follower: name(v),
+                    parent: name(p),
+                    distance_m: far,
+                    visibility_m: params.visibility_range_m,
+                },
+            );
+        }
+        for u in 0..n {
+            if u == v || !self.assigned(u) {
+                continue;
+            }
+            let (al, ah) = self.bbox(v);
+            let (bl, bh) = self.bbox(u);
+            let gap = (al - bh).sup(&(bl - ah)).sup(&Vector3::zeros()).norm();
+            if gap < d_min {
+                let d = self.pair_distance(v, u);
+                if d < d_min {
+                    note(
+                        d_min - d,
+                        FormationError::TooClose {
+                            a: name(v),
+                            b: name(u),
+                            distance_m: d,
+                            d_min_m: d_min,
+                        },
+                    );
+                }
+            }
+            // u hides v's parent
+            if u != p {
+                let c = self.sight_clearance(v, u, params.occlusion_radius_m);
+                if c < params.occlusion_radius_m {
+                    note(
+                        params.occlusion_radius_m - c,
+                        FormationError::Occludes {
+                            observer: name(v),
+                            parent: name(p),
+                            occluder: name(u),
+                            clearance_m: c,
+                            needed_m: params.occlusion_radius_m,
+                        },
+                    );
+                }
+            }
+            // v hides u's parent
+            if u != 0 && self.tree.parent[u] != v {
+                let c = self.sight_clearance(u, v, params.occlusion_radius_m);
+                if c < params.occlusion_radius_m {
+                    note(
+                        params.occlusion_radius_m - c,
+                        FormationError::Occludes {
+                            observer: name(u),
+                            parent: name(self.tree.parent[u]),
+                            occluder: name(v),
+                            clearance_m: c,
+                            needed_m: params.occlusion_radius_m,
+                        },
+                    );
+                }
+            }
+        }
+        worst
+    }
+}
+
+fn check_params(d_min_m: f64, params: &FormationParams) -> Result<(), FormationError> {
+    let pos = |k: &str, v: f64| {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(FormationError::InvalidParam(format!(
+                "{k} must be finite and > 0, got {v}"
+            )))
+        }
+    };
+    pos("d_min_m", d_min_m)?;
+    pos("visibility_range_m", params.visibility_range_m)?;
+    pos("occlusion_radius_m", params.occlusion_radius_m)?;
+    pos("d_b_step_m", params.d_b_step_m)?;
+    if !(params.max_depth_shift_m.is_finite() && params.max_depth_shift_m >= 0.0) {
+        return Err(FormationError::InvalidParam(format!(
+            "max_depth_shift_m must be finite and >= 0, got {}",
+            params.max_depth_shift_m
+        )));
+    }
+    Ok(())
+}
+
+/// Chooses `(D_a, D_b)` for every follower (same order as `followers`), in
+/// [`crate::FollowerConfig`]'s convention (`D_a` with the paper's side sign applied by the
+/// follower; `D_b` signed, + = down). See the [module docs](self).
+pub fn assign_displacements(
+    leader: &str,
+    followers: &[FollowerSlot],
+    d_min_m: f64,
+    params: &FormationParams,
+) -> Result<Vec<(f64, f64)>, FormationError> {
+    check_params(d_min_m, params)?;
+    let tree = build_tree(leader, followers)?;
+    let mut cands: Vec<(f64, f64)> = Vec::new();
+    let mut d_bs = vec![0.0];
+    let mut k = 1.0;
+    while k * params.d_b_step_m <= 2.0 * params.max_depth_shift_m + 1e-9 {
+        d_bs.push(k * params.d_b_step_m);
+        d_bs.push(-k * params.d_b_step_m);
+        k += 1.0;
+    }
+    for &db in &d_bs {
+        for sign in [1.0, -1.0] {
+            for m in [1.25, 1.5, 2.0] {
+                cands.push((sign * m * d_min_m, db));
+            }
+        }
+    }
+    let mut geo = Geometry {
+        tree: &tree,
+        w: vec![None; followers.len()],
+    };
+    let mut choice = vec![0usize; followers.len()];
+    let mut out = vec![(0.0, 0.0); followers.len()];
+    let mut level = 0usize;
+    let mut budget = 20_000usize;
+    // the least-bad failure at the deepest level reached
+    let mut deepest: Option<(usize, f64, FormationError)> = None;
+    while level < tree.order.len() {
+        let f = tree.order[level];
+        let v = f + 1;
+        let mut placed = false;
+        while choice[f] < cands.len() {
+            let cand = cands[choice[f]];
+            choice[f] += 1;
+            if budget == 0 {
+                break;
+            }
+            budget -= 1;
+            geo.w[f] = Some(segment(&tree.slots[v], cand));
+            match geo.violations_of(v, d_min_m, params) {
+                None => {
+                    out[f] = cand;
+                    placed = true;
+                    break;
+                }
+                Some((deficit, e)) => {
+                    let better = match &deepest {
+                        None => true,
+                        Some((lv, d, _)) => level > *lv || (level == *lv && deficit < *d),
+                    };
+                    if better {
+                        deepest = Some((level, deficit, e));
+                    }
+                }
+            }
+        }
+        if placed {
+            level += 1;
+            continue;
+        }
+        geo.w[f] = None;
+        choice[f] = 0;
+        if level == 0 || budget == 0 {
+            let (lv, _, cause) = deepest.unwrap_or((
+                level,
+                0.0,
+                FormationError::InvalidParam("no candidate".to_string()),
+            ));
+            let who = tree.order.get(lv).map_or(f, |x| *x);
+            return Err(FormationError::Impossible {
+                follower: tree.names[who + 1].clone(),
+                cause: Box::new(cause),
+            });
+        }
+        level -= 1;
+        let prev = tree.order[level];
+        geo.w[prev] = None;
+    }
+    Ok(out)
+}
+
+/// Verifies a given assignment (`shoal check`): tree, depth shifts, visibility range,
+/// separation and lines of sight. Returns the worst violation.
+pub fn check(
+    leader: &str,
+    followers: &[FollowerSlot],
+    displacements: &[(f64, f64)],
+    d_min_m: f64,
+    params: &FormationParams,
+) -> Result<(), FormationError> {
+    check_params(d_min_m, params)?;
+    let tree = build_tree(leader, followers)?;
+    if displacements.len() != followers.len() {
+        return Err(FormationError::WrongLength {
+            expected: followers.len(),
+            got: displacements.len(),
+        });
+    }
+    for (f, d) in followers.iter().zip(displacements) {
+        if !(d.0.is_finite() && d.1.is_finite()) {
+            return Err(FormationError::InvalidParam(format!(
+                "{}: displacement must be finite, got {d:?}",
+                f.name
+            )));
+        }
+        if d.1.abs() / 2.0 > params.max_depth_shift_m + 1e-9 {
+            return Err(FormationError::DepthShift {
+                follower: f.name.clone(),
+                shift_m: d.1.abs() / 2.0,
+                max_m: params.max_depth_shift_m,
+            });
+        }
+    }
+    let geo = Geometry {
+        tree: &tree,
+        w: tree
+            .slots
+            .iter()
+            .skip(1)
+            .zip(displacements)
+            .map(|(s, d)| Some(segment(s, *d)))
+            .collect(),
+    };
+    let mut worst: Option<(f64, FormationError)> = None;
+    for v in 1..tree.names.len() {
+        if let Some((d, e)) = geo.violations_of(v, d_min_m, params) {
+            if worst.as_ref().is_none_or(|(w, _)| d > *w) {
+                worst = Some((d, e));
+            }
+        }
+    }
+    match worst {
+        Some((_, e)) => Err(e),
+        None => Ok(()),
+    }
+}

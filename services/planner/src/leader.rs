@@ -1,0 +1,490 @@
+//! The leader: waypoints at a speed, and reactive obstacle avoidance with its own sonar.
+//!
+//! # Guidance
+//! The path is the polyline from the leader's position at its first step through
+//! `waypoints_ned_m`. A virtual target ("rabbit") moves along it at the commanded speed,
+//! never more than `max_lead_m` ahead of the leader's projection on the path and never
+//! behind it; the target velocity is the commanded speed along the path (feed-forward), so in
+//! steady state the leader sits on the rabbit. The speed tapers as `√(2·decel·remaining)` to
+//! stop on the last waypoint; within `acceptance_radius_m` of it the mission is done and the
+//! leader holds there. An intermediate waypoint is passed when the leader comes within
+//! `acceptance_radius_m` of it or its projection passes the leg's end. The wanted heading is
+//! line-of-sight: the leg's course plus `atan(−e/los_lookahead_m)` for a cross-track error `e`.
+//!
+//! # Avoidance (our choice; the paper defers to its ref. [11])
+//! A **lateral offset of the track**. Sonar returns are remembered in NED (the leader has
+//! absolute navigation) until they are `memory_behind_m` behind it. Every step, the returns
+//! between `memory_behind_m` behind and `lookahead_m` ahead along the current leg, at
+//! cross-track positions `e_p`, constrain the offset `o` of the track:
+//! `|e_p − o| ≥ c` with `c = d_min_m + avoid_margin_m`. The wanted offset is the feasible
+//! one with the smallest `|o|` (so 0, the nominal track, whenever it is clear), among the
+//! candidates `0` and `e_p ± c`; ties go to the one nearest the current offset, then to
+//! starboard. The actual offset moves toward it at most `offset_rate_mps`. Once the
+//! obstacle is behind, its points are forgotten and the offset returns to 0 at the same rate:
+//! the leader returns to its track. If no offset within `max_offset_m` is clear, the leader
+//! stops (mode `Blocked`) until one is. A passage at least `2c` wide on the track is taken
+//! straight through. Deterministic: no randomness, ties broken by fixed rules.
+//!
+//! Followers that converge on the leader's track (eq. 8) then keep at least `D_min` from what
+//! the leader passed, since the leader keeps `c ≥ D_min`.
+
+use nalgebra::{UnitQuaternion, Vector3, Vector6};
+use serde::{Deserialize, Serialize};
+
+use crate::frames::{to_level, wrap, yaw_of};
+use crate::shift::beam_vector;
+use crate::types::{
+    cfg_err, check_finite, check_nonneg, check_pos, Mode, PlannerError, PlannerOutput,
+    PlannerState, SonarReturns, Target,
+};
+
+/// Remembered obstacle points of the leader.
+pub const LEADER_MEMORY_CAPACITY: usize = 256;
+
+/// The leader's mission and avoidance (`[mission]` in a scenario).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LeaderConfig {
+    /// Waypoints, NED, m (default one, 100 m north at 10 m depth).
+    pub waypoints_ned_m: Vec<[f64; 3]>,
+    /// Cruise speed, m/s (default 1).
+    pub speed_mps: f64,
+    /// A waypoint is reached within this distance, m (default 2).
+    pub acceptance_radius_m: f64,
+    /// Safe distance to obstacles, m (default 2).
+    pub d_min_m: f64,
+    /// Extra clearance the leader keeps beyond `d_min_m`, m (default 0.5).
+    pub avoid_margin_m: f64,
+    /// Returns up to this far ahead constrain the track offset, m (default 20, the sonar
+    /// range).
+    pub lookahead_m: f64,
+    /// Returns are remembered until this far behind the leader, m (default 3).
+    pub memory_behind_m: f64,
+    /// ... or this old, s (default 120).
+    pub memory_max_age_s: f64,
+    /// Largest track offset, m (default 15).
+    pub max_offset_m: f64,
+    /// Largest rate of change of the offset, m/s (default 0.4).
+    pub offset_rate_mps: f64,
+    /// Line-of-sight lookahead for the heading, m (default 5).
+    pub los_lookahead_m: f64,
+    /// The virtual target is at most this far ahead of the leader's projection, m (default 2).
+    pub max_lead_m: f64,
+    /// Deceleration into the last waypoint, m/s² (default 0.05).
+    pub decel_mps2: f64,
+    /// Transducer position in the body frame, m (default `[0.8, 0, 0]`).
+    pub sonar_mount_body_m: [f64; 3],
+}
+
+impl Default for LeaderConfig {
+    fn default() -> Self {
+        Self {
+            waypoints_ned_m: vec![[100.0, 0.0, 10.0]],
+            speed_mps: 1.0,
+            acceptance_radius_m: 2.0,
+            d_min_m: 2.0,
+            avoid_margin_m: 0.5,
+            lookahead_m: 20.0,
+            memory_behind_m: 3.0,
+            memory_max_age_s: 120.0,
+            max_offset_m: 15.0,
+            offset_rate_mps: 0.4,
+            los_lookahead_m: 5.0,
+            max_lead_m: 2.0,
+            decel_mps2: 0.05,
+            sonar_mount_body_m: [0.8, 0.0, 0.0],
+        }
+    }
+}
+
+impl LeaderConfig {
+    /// Checks every key; the error names the first bad one (`mission.<key>`).
+    pub fn validate(&self) -> Result<(), PlannerError> {
+        if self.waypoints_ned_m.is_empty() {
+            return Err(cfg_err(
+                "mission.waypoints_ned_m",
+                "must have at least one waypoint".to_string(),
+            ));
+        }
+        for (i, w) in self.waypoints_ned_m.iter().enumerate() {
+            if !w.iter().all(|x| x.is_finite()) {
+                return Err(cfg_err(
+                    &format!("mission.waypoints_ned_m[{i}]"),
+                    format!("must be finite, got {w:?}"),
+                ));
+            }
+        }
+        check_pos("mission.speed_mps", self.speed_mps)?;
+        check_pos("mission.acceptance_radius_m", self.acceptance_radius_m)?;
+        check_pos("mission.d_min_m", self.d_min_m)?;
+        check_nonneg("mission.avoid_margin_m", self.avoid_margin_m)?;
+        check_pos("mission.lookahead_m", self.lookahead_m)?;
+        check_nonneg("mission.memory_behind_m", self.memory_behind_m)?;
+        check_pos("mission.memory_max_age_s", self.memory_max_age_s)?;
+        check_nonneg("mission.max_offset_m", self.max_offset_m)?;
+        check_pos("mission.offset_rate_mps", self.offset_rate_mps)?;
+        check_pos("mission.los_lookahead_m", self.los_lookahead_m)?;
+        check_pos("mission.max_lead_m", self.max_lead_m)?;
+        check_pos("mission.decel_mps2", self.decel_mps2)?;
+        for (i, v) in self.sonar_mount_body_m.iter().enumerate() {
+            check_finite(&format!("mission.sonar_mount_body_m[{i}]"), *v)?;
+        }
+        Ok(())
+    }
+}
+
+/// One leader planner step's inputs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LeaderInput {
+    /// Simulation time, s.
+    pub t_s: f64,
+    /// Attitude, body→NED.
+    pub attitude: UnitQuaternion<f64>,
+    /// Body velocity `[u, v, w, p, q, r]`.
+    pub nu: Vector6<f64>,
+    /// Absolute position, NED, m (the leader has absolute navigation).
+    pub position_ned_m: Vector3<f64>,
+    /// A new scan this step, if any.
+    pub sonar: Option<SonarReturns>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct MemPoint {
+    t: f64,
+    pos: Vector3<f64>,
+}
+
+/// The leader planner. See the [module docs](self) for the method.
+#[derive(Debug, Clone)]
+pub struct LeaderPlanner {
+    cfg: LeaderConfig,
+    mount: Vector3<f64>,
+    /// Path vertices: start, then the waypoints (zero-length legs dropped).
+    path: Vec<Vector3<f64>>,
+    /// For each path vertex, the index of the waypoint it is.
+    wp_of: Vec<usize>,
+    /// Cumulative length at each vertex.
+    cum: Vec<f64>,
+    started: bool,
+    t_prev: f64,
+    leg: usize,
+    rabbit: f64,
+    offset: f64,
+    offset_goal: f64,
+    done: Option<(Vector3<f64>, f64)>,
+    memory: Vec<MemPoint>,
+}
+
+impl LeaderPlanner {
+    /// Validates the configuration and pre-allocates.
+    pub fn new(cfg: &LeaderConfig) -> Result<Self, PlannerError> {
+        cfg.validate()?;
+        let n = cfg.waypoints_ned_m.len() + 1;
+        Ok(Self {
+            mount: Vector3::from(cfg.sonar_mount_body_m),
+            path: Vec::with_capacity(n),
+            wp_of: Vec::with_capacity(n),
+            cum: Vec::with_capacity(n),
+            started: false,
+            t_prev: 0.0,
+            leg: 0,
+            rabbit: 0.0,
+            offset: 0.0,
+            offset_goal: 0.0,
+            done: None,
+            memory: Vec::with_capacity(LEADER_MEMORY_CAPACITY),
+            cfg: cfg.clone(),
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &LeaderConfig {
+        &self.cfg
+    }
+
+    /// Current lateral offset of the track, m (+ starboard).
+    pub fn track_offset(&self) -> f64 {
+        self.offset
+    }
+
+    fn total(&self) -> f64 {
+        self.cum.last().copied().unwrap_or(0.0)
+    }
+
+    /// Leg index containing arc length `s`.
+    fn leg_at(&self, s: f64) -> usize {
+        let legs = self.path.len().saturating_sub(1);
+        (0..legs)
+            .find(|&i| s <= self.cum[i + 1])
+            .unwrap_or(legs.saturating_sub(1))
+    }
+
+    /// Unit tangent and starboard normal (horizontal) of leg `i`.
+    fn frame(&self, i: usize) -> (Vector3<f64>, Vector3<f64>) {
+        let d = self.path[i + 1] - self.path[i];
+        let t = d / d.norm().max(1e-12);
+        let h = (t.x * t.x + t.y * t.y).sqrt();
+        let n = if h > 1e-9 {
+            Vector3::new(-t.y / h, t.x / h, 0.0)
+        } else {
+            Vector3::new(0.0, 1.0, 0.0)
+        };
+        (t, n)
+    }
+
+    fn point_at(&self, s: f64) -> (Vector3<f64>, usize) {
+        let i = self.leg_at(s);
+        let (t, _) = self.frame(i);
+        (self.path[i] + t * (s - self.cum[i]).max(0.0), i)
+    }
+
+    fn start(&mut self, pos: &Vector3<f64>) {
+        self.path.push(*pos);
+        self.wp_of.push(0);
+        self.cum.push(0.0);
+        for (j, w) in self.cfg.waypoints_ned_m.iter().enumerate() {
+            let w = Vector3::from(*w);
+            if let Some(last) = self.path.last().copied() {
+                let l = (w - last).norm();
+                if l > 1e-6 {
+                    let c = self.cum.last().copied().unwrap_or(0.0) + l;
+                    self.path.push(w);
+                    self.wp_of.push(j);
+                    self.cum.push(c);
+                }
+            }
+        }
+        self.started = true;
+    }
+
+    fn check_input(input: &LeaderInput) -> Result<(), PlannerError> {
+        let ok = |what, b: bool| {
+            if b {
+                Ok(())
+            } else {
+                Err(PlannerError::NonFiniteInput { what })
+            }
+        };
+        ok("t_s", input.t_s.is_finite())?;
+        ok(
+            "attitude",
+            input
+                .attitude
+                .quaternion()
+                .coords
+                .iter()
+                .all(|x| x.is_finite()),
+        )?;
+        ok("nu", input.nu.iter().all(|x| x.is_finite()))?;
+        ok(
+            "position_ned_m",
+            input.position_ned_m.iter().all(|x| x.is_finite()),
+        )?;
+        Ok(())
+    }
+
+    /// One planner step. On error the state is unchanged.
+    pub fn step(&mut self, input: &LeaderInput) -> Result<PlannerOutput, PlannerError> {
+        Self::check_input(input)?;
+        let t = input.t_s;
+        if self.started && t < self.t_prev {
+            return Err(PlannerError::TimeWentBackwards {
+                previous_s: self.t_prev,
+                now_s: t,
+            });
+        }
+        let pos = input.position_ned_m;
+        let first = !self.started;
+        if first {
+            self.start(&pos);
+        }
+        let dt = if first {
+            0.0
+        } else {
+            (t - self.t_prev).min(1.0)
+        };
+        self.t_prev = t;
+        let att = input.attitude;
+        let yaw = yaw_of(&att);
+        let c = self.cfg.d_min_m + self.cfg.avoid_margin_m;
+        let last_wp = self
+            .cfg
+            .waypoints_ned_m
+            .last()
+            .map(|w| Vector3::from(*w))
+            .unwrap_or(pos);
+
+        // memory of returns, NED
+        if let Some(scan) = &input.sonar {
+            for (d, az, el) in scan.returns() {
+                if self.memory.len() == LEADER_MEMORY_CAPACITY {
+                    self.memory.remove(0);
+                }
+                let p = pos + att * (self.mount + beam_vector(d, az, el));
+                self.memory.push(MemPoint { t, pos: p });
+            }
+        }
+        let (behind, max_age) = (self.cfg.memory_behind_m, self.cfg.memory_max_age_s);
+        self.memory
+            .retain(|m| to_level(yaw, &(m.pos - pos)).x >= -behind && t - m.t <= max_age);
+
+        // mission done (sticky)
+        if self.done.is_none()
+            && (pos - last_wp).norm() <= self.cfg.acceptance_radius_m
+            && (self.path.len() < 2 || self.leg + 2 >= self.path.len())
+        {
+            self.done = Some((last_wp, yaw));
+        }
+        if self.path.len() < 2 && self.done.is_none() {
+            self.done = Some((last_wp, yaw));
+        }
+        if let Some((hold, hold_yaw)) = self.done {
+            return Ok(PlannerOutput {
+                target: Target {
+                    position_m: to_level(yaw, &(hold - pos)),
+                    velocity_mps: Vector3::zeros(),
+                    yaw_rel_rad: wrap(hold_yaw - yaw),
+                },
+                state: self.state(Mode::MissionDone, f64::INFINITY, (hold - pos).norm(), false),
+            });
+        }
+
+        // projection on the current leg; advance past reached waypoints
+        let legs = self.path.len() - 1;
+        loop {
+            let (tg, _) = self.frame(self.leg);
+            let a = self.path[self.leg];
+            let len = self.cum[self.leg + 1] - self.cum[self.leg];
+            let along = (pos - a).dot(&tg);
+            let end = self.path[self.leg + 1];
+            let reached = (pos - end).norm() <= self.cfg.acceptance_radius_m || along >= len;
+            if reached && self.leg + 1 < legs {
+                self.leg += 1;
+            } else {
+                break;
+            }
+        }
+        let (tg, nrm) = self.frame(self.leg);
+        let a = self.path[self.leg];
+        let len = self.cum[self.leg + 1] - self.cum[self.leg];
+        let s_proj = self.cum[self.leg] + (pos - a).dot(&tg).clamp(0.0, len);
+
+        // avoidance: the wanted offset
+        let window = |m: &MemPoint| {
+            let along = (m.pos - pos).dot(&tg);
+            (along >= -behind && along <= self.cfg.lookahead_m).then(|| (m.pos - a).dot(&nrm))
+        };
+        let feasible = |o: f64| {
+            o.abs() <= self.cfg.max_offset_m + 1e-9
+                && self
+                    .memory
+                    .iter()
+                    .filter_map(window)
+                    .all(|e| (e - o).abs() >= c - 1e-9)
+        };
+        let mut best: Option<f64> = None;
+        let better = |o: f64, b: f64, cur: f64| {
+            let (ko, kb) = (o.abs(), b.abs());
+            if (ko - kb).abs() > 1e-9 {
+                return ko < kb;
+            }
+            let (co, cb) = ((o - cur).abs(), (b - cur).abs());
+            if (co - cb).abs() > 1e-9 {
+                return co < cb;
+            }
+            o > b
+        };
+        let cur = self.offset_goal;
+        let mut consider = |o: f64| {
+            if feasible(o) && best.is_none_or(|b| better(o, b, cur)) {
+                best = Some(o);
+            }
+        };
+        consider(0.0);
+        consider(cur);
+        for e in self.memory.iter().filter_map(window) {
+            consider(e + c);
+            consider(e - c);
+        }
+        let blocked = best.is_none();
+        if let Some(o) = best {
+            self.offset_goal = o;
+        }
+        let step = self.cfg.offset_rate_mps * dt;
+        let prev_offset = self.offset;
+        self.offset += (self.offset_goal - self.offset).clamp(-step, step);
+        let offset_rate = if dt > 0.0 {
+            (self.offset - prev_offset) / dt
+        } else {
+            0.0
+        };
+        let delta_min = self
+            .memory
+            .iter()
+            .filter_map(window)
+            .map(|e| (e - self.offset).abs())
+            .fold(f64::INFINITY, f64::min);
+
+        // rabbit
+        let total = self.total();
+        let v_cmd = if blocked {
+            0.0
+        } else {
+            self.cfg
+                .speed_mps
+                .min((2.0 * self.cfg.decel_mps2 * (total - self.rabbit).max(0.0)).sqrt())
+        };
+        self.rabbit = (self.rabbit + v_cmd * dt)
+            .min(s_proj + self.cfg.max_lead_m)
+            .max(s_proj)
+            .min(total);
+        let (p_r, leg_r) = self.point_at(self.rabbit);
+        let (t_r, n_r) = self.frame(leg_r);
+        let target_ned = p_r + n_r * self.offset;
+        let vel_ned = t_r * v_cmd + n_r * offset_rate;
+
+        // line-of-sight heading toward the shifted track
+        let e_v = (pos - a).dot(&nrm) - self.offset;
+        let course = tg.y.atan2(tg.x);
+        let chi = course + (-e_v).atan2(self.cfg.los_lookahead_m);
+
+        let avoiding = self.offset_goal != 0.0 || self.offset != 0.0;
+        let mode = if blocked {
+            Mode::Blocked
+        } else if avoiding {
+            Mode::Avoiding
+        } else {
+            Mode::Tracking
+        };
+        let wp_dist = (pos - self.path[self.leg + 1]).norm();
+        Ok(PlannerOutput {
+            target: Target {
+                position_m: to_level(yaw, &(target_ned - pos)),
+                velocity_mps: to_level(yaw, &vel_ned),
+                yaw_rel_rad: wrap(chi - yaw),
+            },
+            state: self.state(mode, delta_min, wp_dist, delta_min < c),
+        })
+    }
+
+    fn state(&self, mode: Mode, delta_min: f64, wp_dist: f64, avoiding: bool) -> PlannerState {
+        let wp = if self.done.is_some() {
+            self.cfg.waypoints_ned_m.len().saturating_sub(1)
+        } else {
+            self.wp_of.get(self.leg + 1).copied().unwrap_or(0)
+        };
+        PlannerState {
+            mode,
+            slot_nominal_m: Vector3::zeros(),
+            slot_shifted_m: Vector3::zeros(),
+            slot_filtered_m: Vector3::zeros(),
+            delta_min_m: delta_min,
+            parent_age_s: 0.0,
+            parent_estimate_valid: true,
+            avoiding,
+            waypoint_index: wp,
+            waypoint_distance_m: wp_dist,
+            track_offset_m: self.offset,
+        }
+    }
+}
