@@ -1,0 +1,217 @@
+//! Wiring of the planner library to its channels.
+
+use anyhow::Context;
+use ipc_types::{Channel, LeaderPose, Nav, PlannerState, Sample, Setpoint, Sonar};
+use nalgebra::{Isometry3, Matrix6, Translation3, Vector3, Vector6};
+use planner::{
+    FollowerConfig, FollowerInput, FollowerPlanner, LeaderConfig, LeaderInput, LeaderPlanner,
+    PlannerOutput, PoseMeasurement, SonarReturns,
+};
+use shoal_runtime::convert::{arr, quat};
+use shoal_runtime::ports::Origin;
+use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use shoal_scenario::Scenario;
+
+/// The follower configuration of one vehicle: the scenario's shared
+/// `[follower]` section, its slot, D_min from the safety distance, and D_a,
+/// D_b as given or as assigned from the whole formation.
+pub fn follower_config(scenario: &Scenario, name: &str) -> anyhow::Result<FollowerConfig> {
+    let mut cfg: FollowerConfig = scenario.section("follower")?;
+    let spec = scenario.vehicle(name).context("vehicle not in scenario")?;
+    cfg.slot_in_parent_m = spec.slot_m.context("a follower needs slot_m")?;
+    cfg.d_min_m = scenario.safety.safe_distance_m;
+    let (d_a, d_b) = displacements(scenario)?
+        .into_iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, d)| d)
+        .context("follower missing from the formation")?;
+    cfg.d_a_m = spec.d_a_m.unwrap_or(d_a);
+    cfg.d_b_m = spec.d_b_m.unwrap_or(d_b);
+    Ok(cfg)
+}
+
+/// `(name, (D_a, D_b))` of every follower, assigned from the formation.
+pub fn displacements(scenario: &Scenario) -> anyhow::Result<Vec<(String, (f64, f64))>> {
+    let followers: Vec<planner::formation::FollowerSlot> = scenario
+        .vehicles
+        .iter()
+        .filter_map(|v| {
+            Some(planner::formation::FollowerSlot {
+                name: v.name.clone(),
+                parent: v.parent.clone()?,
+                slot_in_parent_m: v.slot_m?,
+            })
+        })
+        .collect();
+    let camera: camera_visibility::Visibility = scenario.section("camera")?;
+    let params = planner::formation::FormationParams {
+        visibility_range_m: camera.visibility_range_m,
+        ..Default::default()
+    };
+    let d = planner::formation::assign_displacements(
+        &scenario.leader().name,
+        &followers,
+        scenario.safety.safe_distance_m,
+        &params,
+    )?;
+    Ok(followers.into_iter().map(|f| f.name).zip(d).collect())
+}
+
+/// Only the visibility range of the `[camera]` section matters here.
+mod camera_visibility {
+    #[derive(serde::Deserialize)]
+    pub struct Visibility {
+        #[serde(default = "default_range")]
+        pub visibility_range_m: f64,
+    }
+    fn default_range() -> f64 {
+        12.0
+    }
+}
+
+enum Role {
+    Leader(LeaderPlanner),
+    Follower {
+        planner: FollowerPlanner,
+        pose_in: Subscriber<LeaderPose>,
+    },
+}
+
+pub struct PlannerTask {
+    role: Role,
+    nav_in: Subscriber<Nav>,
+    sonar_in: Subscriber<Sonar>,
+    setpoint_out: Publisher<Setpoint>,
+    state_out: Publisher<PlannerState>,
+    nav: Option<Nav>,
+}
+
+impl PlannerTask {
+    pub fn new(rt: &Runtime, scenario: &Scenario) -> anyhow::Result<Self> {
+        let me = &rt.args().vehicle;
+        let spec = scenario.vehicle(me).context("vehicle not in scenario")?;
+        let run = &rt.args().run_id;
+        let lim = ChannelLimits::vehicle();
+        let role = if spec.parent.is_none() {
+            let mut cfg: LeaderConfig = scenario.section("mission")?;
+            cfg.d_min_m = scenario.safety.safe_distance_m;
+            Role::Leader(LeaderPlanner::new(&cfg)?)
+        } else {
+            Role::Follower {
+                planner: FollowerPlanner::new(&follower_config(scenario, me)?)?,
+                pose_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::LeaderPose), &lim, 4)?,
+            }
+        };
+        Ok(Self {
+            role,
+            nav_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::Nav), &lim, 4)?,
+            sonar_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::Sonar), &lim, 4)?,
+            setpoint_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Setpoint), &lim)?,
+            state_out: rt.publisher(&ipc_types::service_name(run, me, Channel::PlannerState), &lim)?,
+            nav: None,
+        })
+    }
+}
+
+fn sonar_returns(s: &Sonar) -> SonarReturns {
+    let mut r = SonarReturns {
+        ranges_m: s.ranges_m,
+        azimuth_rad: s.azimuth_rad,
+        elevation_rad: s.elevation_rad,
+        count: (s.count as usize).min(ipc_types::MAX_BEAMS),
+        ..Default::default()
+    };
+    for (d, v) in r.valid.iter_mut().zip(s.valid) {
+        *d = v != 0;
+    }
+    r
+}
+
+fn nu_of(n: &Nav) -> Vector6<f64> {
+    let v = n.velocity_body_mps;
+    let w = n.rates_body_radps;
+    Vector6::new(v[0], v[1], v[2], w[0], w[1], w[2])
+}
+
+impl Task for PlannerTask {
+    fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        if let Some(n) = self.nav_in.latest(ctx)? {
+            self.nav = Some(n);
+        }
+        let Some(nav) = self.nav else {
+            return Ok(()); // nothing known about ourselves yet
+        };
+        let sonar = self.sonar_in.latest(ctx)?;
+        let mut origin = Origin::of(&nav.header);
+        if let Some(s) = &sonar {
+            origin = origin.earliest(Origin::of(&s.header));
+        }
+        let t_s = ctx.sim_time_s();
+        let attitude = quat(nav.q_body_to_ned_wxyz);
+        let out: PlannerOutput = match &mut self.role {
+            Role::Leader(p) => {
+                if nav.position_valid == 0 {
+                    return Err(TaskError("the leader's nav has no absolute position".into()));
+                }
+                p.step(&LeaderInput {
+                    t_s,
+                    attitude,
+                    nu: nu_of(&nav),
+                    position_ned_m: Vector3::from(nav.position_ned_m),
+                    sonar: sonar.as_ref().map(sonar_returns),
+                })
+                .map_err(TaskError::from_display)?
+            }
+            Role::Follower { planner, pose_in } => {
+                let pose = pose_in.latest(ctx)?.map(|p| {
+                    origin = origin.earliest(Origin::of(&p.header));
+                    let mut cov = Matrix6::zeros();
+                    for r in 0..6 {
+                        for c in 0..6 {
+                            cov[(r, c)] = p.covariance[6 * r + c];
+                        }
+                    }
+                    PoseMeasurement {
+                        t_s: p.header.origin_sim_time_ns as f64 * 1e-9,
+                        parent_in_body: Isometry3::from_parts(
+                            Translation3::from(Vector3::from(p.parent_position_body_m)),
+                            quat(p.q_parent_to_body_wxyz),
+                        ),
+                        covariance: cov,
+                        valid: p.valid != 0,
+                    }
+                });
+                planner
+                    .step(&FollowerInput {
+                        t_s,
+                        attitude,
+                        nu: nu_of(&nav),
+                        depth_m: nav.depth_m,
+                        pose,
+                        sonar: sonar.as_ref().map(sonar_returns),
+                    })
+                    .map_err(TaskError::from_display)?
+            }
+        };
+        let mut sp = Setpoint::zeroed();
+        sp.position_m = arr(&out.target.position_m);
+        sp.velocity_mps = arr(&out.target.velocity_mps);
+        sp.yaw_rel_rad = out.target.yaw_rel_rad;
+        sp.mode = out.state.mode.into();
+        self.setpoint_out.publish(sp, ctx, origin)?;
+
+        let s = &out.state;
+        let mut st = PlannerState::zeroed();
+        st.slot_nominal_m = arr(&s.slot_nominal_m);
+        st.slot_shifted_m = arr(&s.slot_shifted_m);
+        st.slot_filtered_m = arr(&s.slot_filtered_m);
+        st.delta_min_m = if s.delta_min_m.is_finite() { s.delta_min_m } else { -1.0 };
+        st.parent_age_s = if s.parent_age_s.is_finite() { s.parent_age_s } else { -1.0 };
+        st.waypoint_distance_m = if s.waypoint_distance_m.is_finite() { s.waypoint_distance_m } else { -1.0 };
+        st.mode = s.mode.into();
+        st.parent_valid = u8::from(s.parent_estimate_valid);
+        st.avoiding = u8::from(s.avoiding);
+        self.state_out.publish(st, ctx, origin)?;
+        Ok(())
+    }
+}
