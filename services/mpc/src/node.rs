@@ -1,0 +1,110 @@
+//! Wiring of the predictive controller to its channels.
+
+use ipc_types::{Channel, MpcStats, Nav, Sample, Setpoint, Thrust};
+use mpc::{Mpc, MpcConfig, MpcInput, MpcTarget};
+use nalgebra::{Vector3, Vector6};
+use shoal_runtime::convert::quat;
+use shoal_runtime::ports::Origin;
+use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use shoal_scenario::Scenario;
+use sim_plant::model::Vehicle;
+use sim_plant::PlantConfig;
+
+pub struct MpcTask {
+    mpc: Mpc,
+    thrust_max: [f64; 6],
+    nav_in: Subscriber<Nav>,
+    setpoint_in: Subscriber<Setpoint>,
+    thrust_out: Publisher<Thrust>,
+    stats_out: Publisher<MpcStats>,
+    nav: Option<Nav>,
+    setpoint: Option<Setpoint>,
+    failures: u64,
+}
+
+impl MpcTask {
+    pub fn new(rt: &Runtime, scenario: &Scenario) -> anyhow::Result<Self> {
+        let me = &rt.args().vehicle;
+        let plant: PlantConfig = scenario.section("plant")?;
+        let mut cfg: MpcConfig = scenario.section("mpc")?;
+        // One source of truth: the control period is the process's rate and
+        // the bounds are the plant's saturation.
+        cfg.step_s = 1.0 / scenario.rates.mpc_hz;
+        cfg.thrust_max = plant.thrust_max;
+        let vehicle = Vehicle::new(&plant.vehicle)?;
+        let run = &rt.args().run_id;
+        let lim = ChannelLimits::vehicle();
+        Ok(Self {
+            mpc: Mpc::new(&cfg, &vehicle)?,
+            thrust_max: plant.thrust_max,
+            nav_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::Nav), &lim, 4)?,
+            setpoint_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::Setpoint), &lim, 4)?,
+            thrust_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Thrust), &lim)?,
+            stats_out: rt.publisher(&ipc_types::service_name(run, me, Channel::MpcStats), &lim)?,
+            nav: None,
+            setpoint: None,
+            failures: 0,
+        })
+    }
+}
+
+impl Task for MpcTask {
+    fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        if let Some(n) = self.nav_in.latest(ctx)? {
+            self.nav = Some(n);
+        }
+        if let Some(s) = self.setpoint_in.latest(ctx)? {
+            self.setpoint = Some(s);
+        }
+        let (Some(nav), Some(sp)) = (self.nav, self.setpoint) else {
+            return Ok(());
+        };
+        let v = nav.velocity_body_mps;
+        let w = nav.rates_body_radps;
+        let input = MpcInput {
+            attitude: quat(nav.q_body_to_ned_wxyz),
+            nu: Vector6::new(v[0], v[1], v[2], w[0], w[1], w[2]),
+            target: MpcTarget {
+                position_m: Vector3::from(sp.position_m),
+                velocity_mps: Vector3::from(sp.velocity_mps),
+                yaw_rel_rad: sp.yaw_rel_rad,
+            },
+        };
+        let t0 = shoal_runtime::mono_ns();
+        let result = self.mpc.step(&input);
+        let solve_ns = shoal_runtime::mono_ns().saturating_sub(t0);
+        let mut stats = MpcStats::zeroed();
+        stats.solve_ns = solve_ns;
+        let (tau, fallback) = match result {
+            Ok(out) => {
+                stats.iterations = out.iterations;
+                stats.status = u32::from(out.status.code());
+                stats.cost = if out.cost.is_finite() { out.cost } else { 0.0 };
+                (out.tau, false)
+            }
+            Err(e) => {
+                self.failures += 1;
+                stats.status = 100;
+                tracing::warn!(error = %e, "mpc solve failed; holding the previous input, decaying");
+                (self.mpc.fallback(), true)
+            }
+        };
+        stats.failures = self.failures;
+        let mut thrust = Thrust::zeroed();
+        let mut mask = 0u8;
+        for i in 0..6 {
+            let lim = self.thrust_max[i];
+            let t = if tau[i].is_finite() { tau[i].clamp(-lim, lim) } else { 0.0 };
+            if t.abs() >= lim * (1.0 - 1e-9) {
+                mask |= 1 << i;
+            }
+            thrust.tau[i] = t;
+        }
+        thrust.saturated_mask = mask;
+        thrust.fallback = u8::from(fallback);
+        let origin = Origin::of(&sp.header).earliest(Origin::of(&nav.header));
+        self.thrust_out.publish(thrust, ctx, origin)?;
+        self.stats_out.publish(stats, ctx, origin)?;
+        Ok(())
+    }
+}
