@@ -200,6 +200,15 @@ pub struct ParentEstimate {
     pub age_s: f64,
 }
 
+/// The slot's geometry and filter state (boxed to keep the planner small).
+#[derive(Debug, Clone)]
+struct SlotState {
+    disp: Displacement,
+    filter: SlotFilter,
+    last_shift: Shift,
+    anchor: Option<Anchor>,
+}
+
 #[derive(Debug, Clone, Copy)]
 struct OwnPose {
     t: f64,
@@ -244,21 +253,20 @@ struct Anchor {
 /// `parent_estimate_valid` always say how old the estimate is.
 #[derive(Debug, Clone)]
 pub struct FollowerPlanner {
-    cfg: FollowerConfig,
-    disp: Displacement,
+    // boxed: keeps the planner small enough to move around by value
+    cfg: Box<FollowerConfig>,
+    slot: Box<SlotState>,
     mount: Vector3<f64>,
-    observer: ParentObserver,
-    filter: SlotFilter,
+    observer: Box<ParentObserver>,
     t_start: Option<f64>,
     t_prev: f64,
     odo: Vector3<f64>,
     history: Vec<OwnPose>,
     memory: Vec<MemPoint>,
     t_last_fix: Option<f64>,
+    t_last_seen_fix: Option<f64>,
     consecutive_fixes: u32,
     mode: Mode,
-    anchor: Option<Anchor>,
-    last_shift: Shift,
     last_target_odo: Option<(Vector3<f64>, Vector3<f64>, f64)>,
 }
 
@@ -275,34 +283,37 @@ impl FollowerPlanner {
         let mut filter = SlotFilter::new(cfg.beta);
         filter.reset(slot);
         Ok(Self {
-            disp,
+            slot: Box::new(SlotState {
+                disp,
+                filter,
+                last_shift: Shift {
+                    slot,
+                    lambda: 0.0,
+                    delta_min: f64::INFINITY,
+                    y_dc: None,
+                    active: false,
+                },
+                anchor: None,
+            }),
             mount: Vector3::from(cfg.sonar_mount_body_m),
-            observer: ParentObserver::new(ObserverParams {
+            observer: Box::new(ParentObserver::new(ObserverParams {
                 accel_noise_mps2: cfg.accel_noise_mps2,
                 yaw_accel_noise_radps2: cfg.yaw_accel_noise_radps2,
                 gate_chi2: cfg.gate_chi2,
                 max_rejections: cfg.max_rejections,
                 initial_speed_std_mps: 1.0,
-            }),
-            filter,
+            })),
             t_start: None,
             t_prev: 0.0,
             odo: Vector3::zeros(),
             history: Vec::with_capacity(HISTORY_CAPACITY),
             memory: Vec::with_capacity(MEMORY_CAPACITY),
             t_last_fix: None,
+            t_last_seen_fix: None,
             consecutive_fixes: 0,
             mode: Mode::ParentLost,
-            anchor: None,
-            last_shift: Shift {
-                slot,
-                lambda: 0.0,
-                delta_min: f64::INFINITY,
-                y_dc: None,
-                active: false,
-            },
             last_target_odo: None,
-            cfg: cfg.clone(),
+            cfg: Box::new(cfg.clone()),
         })
     }
 
@@ -313,7 +324,7 @@ impl FollowerPlanner {
 
     /// The displacement segment of this follower (eqs. 4-5).
     pub fn displacement(&self) -> &Displacement {
-        &self.disp
+        &self.slot.disp
     }
 
     /// Number of remembered obstacle points.
@@ -439,7 +450,10 @@ impl FollowerPlanner {
         // 2. observer: predict, then the new fix
         self.observer.predict(t);
         let age_before = self.t_last_fix.map_or(f64::INFINITY, |tf| t - tf);
-        if let Some(pm) = input.pose {
+        // a fix no newer than the last fused one is a repeat (or out of order): ignored
+        let repeat = |pm: &PoseMeasurement| self.t_last_seen_fix.is_some_and(|tf| pm.t_s <= tf);
+        if let Some(pm) = input.pose.filter(|pm| !repeat(pm)) {
+            self.t_last_seen_fix = Some(pm.t_s);
             if pm.valid {
                 let t_meas = pm.t_s.min(t);
                 let own = self.own_at(t_meas).unwrap_or(OwnPose {
@@ -525,13 +539,13 @@ impl FollowerPlanner {
             Mode::Tracking | Mode::Avoiding => {
                 if self.mode == Mode::ParentLost {
                     // re-entering: restart the slot filter from the current shift
-                    self.filter.reset(self.last_shift.slot);
+                    self.slot.filter.reset(self.slot.last_shift.slot);
                 }
-                self.anchor = None;
+                self.slot.anchor = None;
                 self.track(dt)
             }
             Mode::Coasting => {
-                let anchor = match self.anchor {
+                let anchor = match self.slot.anchor {
                     Some(a) if self.mode == Mode::Coasting => a,
                     _ => {
                         let (p, v, y) =
@@ -543,7 +557,7 @@ impl FollowerPlanner {
                             vel: Vector3::new(v.x, v.y, 0.0),
                             yaw: y,
                         };
-                        self.anchor = Some(a);
+                        self.slot.anchor = Some(a);
                         a
                     }
                 };
@@ -562,7 +576,7 @@ impl FollowerPlanner {
                 )
             }
             _ => {
-                let anchor = match self.anchor {
+                let anchor = match self.slot.anchor {
                     Some(a) if self.mode == Mode::ParentLost => a,
                     Some(a) if self.mode == Mode::Coasting => {
                         let a = Anchor {
@@ -571,7 +585,7 @@ impl FollowerPlanner {
                             vel: Vector3::zeros(),
                             yaw: a.yaw,
                         };
-                        self.anchor = Some(a);
+                        self.slot.anchor = Some(a);
                         a
                     }
                     _ => {
@@ -585,7 +599,7 @@ impl FollowerPlanner {
                             vel: Vector3::zeros(),
                             yaw,
                         };
-                        self.anchor = Some(a);
+                        self.slot.anchor = Some(a);
                         a
                     }
                 };
@@ -601,13 +615,13 @@ impl FollowerPlanner {
         };
         let state = PlannerState {
             mode,
-            slot_nominal_m: self.disp.slot,
-            slot_shifted_m: self.last_shift.slot,
-            slot_filtered_m: self.filter.value().unwrap_or(self.disp.slot),
-            delta_min_m: self.last_shift.delta_min,
+            slot_nominal_m: self.slot.disp.slot,
+            slot_shifted_m: self.slot.last_shift.slot,
+            slot_filtered_m: self.slot.filter.value().unwrap_or(self.slot.disp.slot),
+            delta_min_m: self.slot.last_shift.delta_min,
             parent_age_s: age,
             parent_estimate_valid: fresh,
-            avoiding: self.last_shift.active,
+            avoiding: self.slot.last_shift.active,
             waypoint_index: 0,
             waypoint_distance_m: 0.0,
             track_offset_m: 0.0,
@@ -623,26 +637,26 @@ impl FollowerPlanner {
         let yaw_parent = self.observer.yaw();
         let r_parent = self.observer.yaw_rate();
         // eq. (6): remembered returns in the parent's frame (rotation from vision)
-        let shift = self.disp.shift(
+        let shift = self.slot.disp.shift(
             self.memory
                 .iter()
                 .map(|m| to_level(yaw_parent, &(m.pos - p_parent)).y),
             self.cfg.d_min_m,
         );
-        let prev = self.filter.value().unwrap_or(self.disp.slot);
-        let filtered = self.filter.update(&shift.slot); // eq. (9)
+        let prev = self.slot.filter.value().unwrap_or(self.slot.disp.slot);
+        let filtered = self.slot.filter.update(&shift.slot); // eq. (9)
         let slot_rate = if dt > 0.0 {
             (filtered - prev) / dt
         } else {
             Vector3::zeros()
         };
-        self.last_shift = shift;
+        self.slot.last_shift = shift;
         let arm = from_level(yaw_parent, &filtered);
         let pos = p_parent + arm;
         let vel =
             v_parent + Vector3::z().cross(&arm) * r_parent + from_level(yaw_parent, &slot_rate);
         self.last_target_odo = Some((pos, vel, yaw_parent));
-        let returning = (filtered - self.disp.slot).norm() > 0.05;
+        let returning = (filtered - self.slot.disp.slot).norm() > 0.05;
         let mode = if shift.active || returning {
             Mode::Avoiding
         } else {

@@ -537,6 +537,19 @@ pub fn assign_displacements(
             }
         }
     }
+    // the nominal formation (no displacement) must already be safe: no D_a/D_b can fix it
+    let nominal = Geometry {
+        tree: &tree,
+        w: vec![Some(Vector3::zeros()); followers.len()],
+    };
+    for &f in &tree.order {
+        if let Some((_, cause)) = nominal.violations_of(f + 1, d_min_m, params) {
+            return Err(FormationError::Impossible {
+                follower: tree.names[f + 1].clone(),
+                cause: Box::new(cause),
+            });
+        }
+    }
     let mut geo = Geometry {
         tree: &tree,
         w: vec![None; followers.len()],
@@ -544,7 +557,7 @@ pub fn assign_displacements(
     let mut choice = vec![0usize; followers.len()];
     let mut out = vec![(0.0, 0.0); followers.len()];
     let mut level = 0usize;
-    let mut budget = 20_000usize;
+    let mut budget = 4_000usize;
     // the least-bad failure at the deepest level reached
     let mut deepest: Option<(usize, f64, FormationError)> = None;
     while level < tree.order.len() {

@@ -99,15 +99,23 @@ impl PlannerTask {
         } else {
             Role::Follower {
                 planner: FollowerPlanner::new(&follower_config(scenario, me)?)?,
-                pose_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::LeaderPose), &lim, 4)?,
+                pose_in: rt.subscriber(
+                    &ipc_types::service_name(run, me, Channel::LeaderPose),
+                    &lim,
+                    4,
+                )?,
             }
         };
         Ok(Self {
             role,
             nav_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::Nav), &lim, 4)?,
             sonar_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::Sonar), &lim, 4)?,
-            setpoint_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Setpoint), &lim)?,
-            state_out: rt.publisher(&ipc_types::service_name(run, me, Channel::PlannerState), &lim)?,
+            setpoint_out: rt
+                .publisher(&ipc_types::service_name(run, me, Channel::Setpoint), &lim)?,
+            state_out: rt.publisher(
+                &ipc_types::service_name(run, me, Channel::PlannerState),
+                &lim,
+            )?,
             nav: None,
         })
     }
@@ -151,7 +159,9 @@ impl Task for PlannerTask {
         let out: PlannerOutput = match &mut self.role {
             Role::Leader(p) => {
                 if nav.position_valid == 0 {
-                    return Err(TaskError("the leader's nav has no absolute position".into()));
+                    return Err(TaskError(
+                        "the leader's nav has no absolute position".into(),
+                    ));
                 }
                 p.step(&LeaderInput {
                     t_s,
@@ -205,9 +215,21 @@ impl Task for PlannerTask {
         st.slot_nominal_m = arr(&s.slot_nominal_m);
         st.slot_shifted_m = arr(&s.slot_shifted_m);
         st.slot_filtered_m = arr(&s.slot_filtered_m);
-        st.delta_min_m = if s.delta_min_m.is_finite() { s.delta_min_m } else { -1.0 };
-        st.parent_age_s = if s.parent_age_s.is_finite() { s.parent_age_s } else { -1.0 };
-        st.waypoint_distance_m = if s.waypoint_distance_m.is_finite() { s.waypoint_distance_m } else { -1.0 };
+        st.delta_min_m = if s.delta_min_m.is_finite() {
+            s.delta_min_m
+        } else {
+            -1.0
+        };
+        st.parent_age_s = if s.parent_age_s.is_finite() {
+            s.parent_age_s
+        } else {
+            -1.0
+        };
+        st.waypoint_distance_m = if s.waypoint_distance_m.is_finite() {
+            s.waypoint_distance_m
+        } else {
+            -1.0
+        };
         st.mode = s.mode.into();
         st.parent_valid = u8::from(s.parent_estimate_valid);
         st.avoiding = u8::from(s.avoiding);

@@ -1,4 +1,5 @@
 //! Eqs. (4)-(9), worked by hand.
+#![allow(clippy::unwrap_used, clippy::panic)] // test fixtures
 
 use approx::assert_relative_eq;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
