@@ -173,6 +173,8 @@ pub struct LeaderPlanner {
     offset_goal: f64,
     done: Option<(Vector3<f64>, f64)>,
     memory: Vec<MemPoint>,
+    /// Scratch: cross-track positions of the returns in the window.
+    window: Vec<f64>,
 }
 
 impl LeaderPlanner {
@@ -193,6 +195,7 @@ impl LeaderPlanner {
             offset_goal: 0.0,
             done: None,
             memory: Vec::with_capacity(LEADER_MEMORY_CAPACITY),
+            window: Vec::with_capacity(LEADER_MEMORY_CAPACITY),
             cfg: cfg.clone(),
         })
     }
@@ -369,18 +372,22 @@ impl LeaderPlanner {
         let len = self.cum[self.leg + 1] - self.cum[self.leg];
         let s_proj = self.cum[self.leg] + (pos - a).dot(&tg).clamp(0.0, len);
 
-        // avoidance: the wanted offset
-        let window = |m: &MemPoint| {
+        // avoidance: the wanted offset, from the sorted cross-track positions in the window
+        let mut es = std::mem::take(&mut self.window);
+        es.clear();
+        es.extend(self.memory.iter().filter_map(|m| {
             let along = (m.pos - pos).dot(&tg);
             (along >= -behind && along <= self.cfg.lookahead_m).then(|| (m.pos - a).dot(&nrm))
-        };
+        }));
+        es.sort_unstable_by(f64::total_cmp); // in place, no allocation
+        let max_offset = self.cfg.max_offset_m;
         let feasible = |o: f64| {
-            o.abs() <= self.cfg.max_offset_m + 1e-9
-                && self
-                    .memory
-                    .iter()
-                    .filter_map(window)
-                    .all(|e| (e - o).abs() >= c - 1e-9)
+            if o.abs() > max_offset + 1e-9 {
+                return false;
+            }
+            // the first point at or above o − c must be at least o + c
+            let i = es.partition_point(|e| *e <= o - c + 1e-9);
+            es.get(i).is_none_or(|e| *e >= o + c - 1e-9)
         };
         let mut best: Option<f64> = None;
         let better = |o: f64, b: f64, cur: f64| {
@@ -402,7 +409,7 @@ impl LeaderPlanner {
         };
         consider(0.0);
         consider(cur);
-        for e in self.memory.iter().filter_map(window) {
+        for e in &es {
             consider(e + c);
             consider(e - c);
         }
@@ -418,12 +425,11 @@ impl LeaderPlanner {
         } else {
             0.0
         };
-        let delta_min = self
-            .memory
+        let delta_min = es
             .iter()
-            .filter_map(window)
             .map(|e| (e - self.offset).abs())
             .fold(f64::INFINITY, f64::min);
+        self.window = es;
 
         // rabbit
         let total = self.total();

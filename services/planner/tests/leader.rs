@@ -1,0 +1,237 @@
+//! The leader planner closed around a kinematic vehicle and the real sonar simulator.
+#![allow(clippy::unwrap_used, clippy::panic)] // test fixtures
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
+use planner::{LeaderConfig, LeaderInput, LeaderPlanner, Mode, PlannerOutput, SonarReturns};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use sonar::{Obstacle, ObstacleField, Sonar, SonarConfig};
+
+const DT: f64 = 0.1;
+
+struct Leader {
+    planner: LeaderPlanner,
+    pos: Vector3<f64>,
+    yaw: f64,
+    vel: Vector3<f64>,
+    t: f64,
+    sonar: Sonar,
+    field: ObstacleField,
+    rng: ChaCha8Rng,
+}
+
+impl Leader {
+    fn new(cfg: &LeaderConfig, obstacles: &[Obstacle]) -> Self {
+        Self {
+            planner: LeaderPlanner::new(cfg).unwrap(),
+            pos: Vector3::new(0.0, 0.0, 10.0),
+            yaw: 0.0,
+            vel: Vector3::zeros(),
+            t: 0.0,
+            sonar: Sonar::new(&SonarConfig::default()).unwrap(),
+            field: ObstacleField::new(obstacles).unwrap(),
+            rng: ChaCha8Rng::seed_from_u64(3),
+        }
+    }
+
+    /// One step: scan, plan, then move like a well-tuned controller would (velocity
+    /// feed-forward plus a proportional pull to the target, heading straight to the wanted).
+    fn step(&mut self) -> PlannerOutput {
+        let att = UnitQuaternion::from_euler_angles(0.0, 0.0, self.yaw);
+        let iso = Isometry3::from_parts(Translation3::from(self.pos), att);
+        let s = self.sonar.scan(&self.field, &iso, &[], &mut self.rng);
+        let sonar = SonarReturns {
+            ranges_m: s.ranges_m,
+            azimuth_rad: s.azimuth_rad,
+            elevation_rad: s.elevation_rad,
+            valid: s.valid,
+            count: s.count,
+        };
+        let nu_lin = att.inverse() * self.vel;
+        let out = self
+            .planner
+            .step(&LeaderInput {
+                t_s: self.t,
+                attitude: att,
+                nu: Vector6::new(nu_lin.x, nu_lin.y, nu_lin.z, 0.0, 0.0, 0.0),
+                position_ned_m: self.pos,
+                sonar: Some(sonar),
+            })
+            .unwrap();
+        let v = att * (out.target.velocity_mps + out.target.position_m * 1.0);
+        self.vel = v;
+        self.pos += v * DT;
+        self.yaw += out.target.yaw_rel_rad.clamp(-0.1, 0.1);
+        self.t += DT;
+        out
+    }
+
+    fn clearance(&self) -> f64 {
+        self.field.distance(&Point3::from(self.pos))
+    }
+}
+
+#[test]
+fn leader_reaches_its_waypoints() {
+    let cfg = LeaderConfig {
+        waypoints_ned_m: vec![[30.0, 0.0, 10.0], [30.0, 30.0, 12.0], [0.0, 30.0, 10.0]],
+        ..LeaderConfig::default()
+    };
+    let mut l = Leader::new(&cfg, &[]);
+    let mut seen = [false; 3];
+    let mut done_at = None;
+    for _ in 0..2000 {
+        let out = l.step();
+        seen[out.state.waypoint_index] = true;
+        // feed-forward plus a 1/s pull toward a target at most max_lead_m ahead
+        let bound = cfg.speed_mps + cfg.max_lead_m * 1.0 + 1e-6;
+        assert!(l.vel.norm() <= bound, "speed {}", l.vel.norm());
+        if out.state.mode == Mode::MissionDone {
+            done_at.get_or_insert(l.t);
+            assert_eq!(out.target.velocity_mps, Vector3::zeros());
+        }
+    }
+    assert_eq!(seen, [true; 3]);
+    let done_at = done_at.expect("mission not done");
+    // 90 m of path at 1 m/s, plus the slow-down into the last waypoint and the corners
+    assert!(done_at > 85.0 && done_at < 140.0, "done at {done_at} s");
+    let last = Vector3::from(cfg.waypoints_ned_m[2]);
+    assert!((l.pos - last).norm() <= cfg.acceptance_radius_m);
+}
+
+#[test]
+fn leader_offsets_around_an_obstacle_and_returns_to_its_track() {
+    let cfg = LeaderConfig {
+        waypoints_ned_m: vec![[120.0, 0.0, 10.0]],
+        ..LeaderConfig::default()
+    };
+    let pillar = Obstacle::Cylinder {
+        center_ned_m: [50.0, 0.5, 10.0],
+        radius_m: 2.0,
+        half_height_m: 10.0,
+    };
+    let mut l = Leader::new(&cfg, &[pillar]);
+    let mut min_clear = f64::INFINITY;
+    let mut max_dev: f64 = 0.0;
+    let mut avoided = false;
+    while l.pos.x < 110.0 && l.t < 300.0 {
+        let out = l.step();
+        min_clear = min_clear.min(l.clearance());
+        if out.state.mode == Mode::Avoiding {
+            avoided = true;
+        }
+        max_dev = max_dev.max(l.pos.y.abs());
+        if l.pos.x > 85.0 {
+            // back on the track
+            assert!(l.pos.y.abs() < 0.3, "y {} at x {}", l.pos.y, l.pos.x);
+            assert_eq!(out.state.track_offset_m, 0.0);
+            assert_eq!(out.state.mode, Mode::Tracking);
+        }
+    }
+    assert!(avoided);
+    // the pillar blocks the track: the leader swerved by more than its radius ...
+    assert!(max_dev > 2.0, "max deviation {max_dev}");
+    // ... and kept the safe distance from its surface (centre to surface)
+    assert!(min_clear >= cfg.d_min_m, "min clearance {min_clear}");
+}
+
+#[test]
+fn leader_goes_straight_through_a_passage_wide_enough() {
+    // the paper's passage: walls at |y| ≥ 4, 8 m apart; clearance needed 2 + 0.5
+    let walls = [
+        Obstacle::Box {
+            center_ned_m: [70.0, -9.0, 10.0],
+            half_extents_m: [10.0, 5.0, 15.0],
+            yaw_deg: 0.0,
+        },
+        Obstacle::Box {
+            center_ned_m: [70.0, 9.0, 10.0],
+            half_extents_m: [10.0, 5.0, 15.0],
+            yaw_deg: 0.0,
+        },
+    ];
+    let cfg = LeaderConfig {
+        waypoints_ned_m: vec![[170.0, 0.0, 10.0]],
+        ..LeaderConfig::default()
+    };
+    let mut l = Leader::new(&cfg, &walls);
+    while l.pos.x < 100.0 && l.t < 300.0 {
+        let out = l.step();
+        assert_eq!(out.state.track_offset_m, 0.0);
+        assert!(l.pos.y.abs() < 0.05);
+    }
+    assert!(l.pos.x >= 100.0);
+}
+
+#[test]
+fn leader_stops_when_no_offset_is_clear() {
+    let cfg = LeaderConfig {
+        waypoints_ned_m: vec![[100.0, 0.0, 10.0]],
+        max_offset_m: 1.0,
+        ..LeaderConfig::default()
+    };
+    let wall = Obstacle::Box {
+        center_ned_m: [40.0, 0.0, 10.0],
+        half_extents_m: [1.0, 30.0, 15.0],
+        yaw_deg: 0.0,
+    };
+    let mut l = Leader::new(&cfg, &[wall]);
+    let mut blocked = false;
+    for _ in 0..1500 {
+        let out = l.step();
+        if out.state.mode == Mode::Blocked {
+            blocked = true;
+            assert_eq!(out.target.velocity_mps.x, 0.0);
+        }
+    }
+    assert!(blocked);
+    assert!(l.vel.norm() < 1e-3, "still moving at {}", l.vel.norm());
+    assert!(
+        l.clearance() > cfg.d_min_m,
+        "stopped {} m from the wall",
+        l.clearance()
+    );
+}
+
+#[test]
+fn leader_is_deterministic() {
+    let cfg = LeaderConfig::default();
+    let pillar = Obstacle::Sphere {
+        center_ned_m: [30.0, -1.0, 10.0],
+        radius_m: 2.0,
+    };
+    let run = || {
+        let mut l = Leader::new(&cfg, std::slice::from_ref(&pillar));
+        (0..600).map(|_| l.step()).collect::<Vec<_>>()
+    };
+    assert_eq!(run(), run());
+}
+
+#[test]
+fn mission_config_reads_from_toml() {
+    let cfg: LeaderConfig =
+        toml::from_str("waypoints_ned_m = [[170.0, 0.0, 10.0]]\nspeed_mps = 1.0").unwrap();
+    assert_eq!(cfg.waypoints_ned_m.len(), 1);
+    assert_eq!(
+        cfg.acceptance_radius_m,
+        LeaderConfig::default().acceptance_radius_m
+    );
+    let bad = LeaderConfig {
+        waypoints_ned_m: vec![],
+        ..LeaderConfig::default()
+    };
+    assert!(LeaderPlanner::new(&bad)
+        .unwrap_err()
+        .to_string()
+        .contains("mission.waypoints_ned_m"));
+    let bad = LeaderConfig {
+        speed_mps: 0.0,
+        ..LeaderConfig::default()
+    };
+    assert!(bad
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("mission.speed_mps"));
+    assert!(toml::from_str::<LeaderConfig>("speed = 1.0").is_err());
+}
