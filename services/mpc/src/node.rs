@@ -38,7 +38,11 @@ impl MpcTask {
             mpc: Mpc::new(&cfg, &vehicle)?,
             thrust_max: plant.thrust_max,
             nav_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::Nav), &lim, 4)?,
-            setpoint_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::Setpoint), &lim, 4)?,
+            setpoint_in: rt.subscriber(
+                &ipc_types::service_name(run, me, Channel::Setpoint),
+                &lim,
+                4,
+            )?,
             thrust_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Thrust), &lim)?,
             stats_out: rt.publisher(&ipc_types::service_name(run, me, Channel::MpcStats), &lim)?,
             nav: None,
@@ -94,7 +98,11 @@ impl Task for MpcTask {
         let mut mask = 0u8;
         for i in 0..6 {
             let lim = self.thrust_max[i];
-            let t = if tau[i].is_finite() { tau[i].clamp(-lim, lim) } else { 0.0 };
+            let t = if tau[i].is_finite() {
+                tau[i].clamp(-lim, lim)
+            } else {
+                0.0
+            };
             if t.abs() >= lim * (1.0 - 1e-9) {
                 mask |= 1 << i;
             }
