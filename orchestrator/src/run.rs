@@ -136,6 +136,18 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     }
 
     let run_id = sys::random_id();
+    // Written first, so tools and tests can find the live run's domain.
+    let run_json = serde_json::json!({
+        "run_id": run_id,
+        "pid": std::process::id(),
+        "domain_prefix": shoal_runtime::domain::domain_prefix(&run_id),
+        "domain_root": shoal_runtime::domain::domain_root(&run_id),
+        "mode": opts.mode.as_str(),
+    });
+    std::fs::write(
+        opts.out.join("run.json"),
+        serde_json::to_string_pretty(&run_json)?,
+    )?;
     let mut ports = Ports::open(&run_id, &procs)?;
     let mut sup = Supervisor::default();
     let epoch_margin_ns = 1_000_000_000 + 20_000_000 * procs.len() as u64;
@@ -322,6 +334,9 @@ fn realtime(
         .create::<ipc::Service>()
         .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
     let _ = &ports.node;
+    let _tick = waitset
+        .attach_interval(Duration::from_millis(100))
+        .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
     loop {
         let now = shoal_runtime::mono_ns();
         if now >= end {

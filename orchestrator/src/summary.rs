@@ -239,6 +239,8 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
         "real_time_factor": if outcome.wall_time_s > 0.0 { outcome.sim_time_s / outcome.wall_time_s } else { 0.0 },
         "vehicles": names.len(),
         "processes": outcome.processes,
+        "run_id": outcome.run_id,
+        "ticks": outcome.ticks,
         "cpu_time_s": outcome.cpu_time_s,
         "max_rss_kib": outcome.max_rss_kib,
         "safety": {

@@ -99,11 +99,6 @@ impl Supervisor {
         deaths
     }
 
-    /// Number of children not yet reaped.
-    pub fn running(&self) -> usize {
-        self.children.iter().filter(|c| c.exit.is_none()).count()
-    }
-
     /// Marks the run as stopping: exits from now on are expected.
     pub fn begin_stop(&mut self) {
         self.stopping = true;

@@ -119,9 +119,3 @@ pub fn random_id() -> String {
     }
     buf.iter().map(|b| format!("{b:02x}")).collect()
 }
-
-/// True if a process with this pid exists.
-pub fn alive(pid: i32) -> bool {
-    // SAFETY: signal 0 only checks for existence.
-    unsafe { libc::kill(pid, 0) == 0 }
-}

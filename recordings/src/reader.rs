@@ -31,6 +31,47 @@ pub enum RecordingError {
     },
 }
 
+/// What a pass over the records has found so far.
+#[derive(Default)]
+struct Collect {
+    channels: Vec<ChannelInfo>,
+    schemas: HashMap<u16, String>,
+    messages: Vec<StoredMessage>,
+    metadata: BTreeMap<String, BTreeMap<String, String>>,
+}
+
+impl Collect {
+    /// Takes one record; schemas, channels and metadata go to `file` (they
+    /// stay known even if this chunk is dropped), messages stay in `self`.
+    fn record(&mut self, record: mcap::records::Record<'_>, file: &mut Collect) {
+        use mcap::records::Record;
+        match record {
+            Record::Schema { header, .. } => {
+                file.schemas.insert(header.id, header.name.clone());
+            }
+            Record::Channel(c) if !file.channels.iter().any(|x| x.id == c.id) => {
+                let schema_name = file.schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                file.channels.push(ChannelInfo {
+                    id: c.id,
+                    topic: c.topic.clone(),
+                    schema_name,
+                    encoding: c.message_encoding.clone(),
+                });
+            }
+            Record::Message { header, data } => self.messages.push(StoredMessage {
+                channel: header.channel_id,
+                log_time: header.log_time,
+                sequence: header.sequence,
+                data: data.into_owned(),
+            }),
+            Record::Metadata(m) => {
+                file.metadata.insert(m.name.clone(), m.metadata.clone());
+            }
+            _ => {}
+        }
+    }
+}
+
 /// One channel of a recording.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ChannelInfo {
@@ -88,103 +129,48 @@ impl Recording {
         }
         let complete = bytes.len() >= 16 && &bytes[bytes.len() - 8..] == mcap::MAGIC;
         let mut truncated = !complete;
-        let mut channels: Vec<ChannelInfo> = Vec::new();
-        let mut schemas: HashMap<u16, String> = HashMap::new();
-        let mut messages = Vec::new();
-        let mut metadata = BTreeMap::new();
 
         let reader = mcap::read::LinearReader::new_with_options(
             bytes,
             mcap::read::Options::IgnoreEndMagic.into(),
         )
         .map_err(|e| format_err(e.to_string()))?;
+        let mut state = Collect::default();
         for record in reader {
-            let record = match record {
-                Ok(r) => r,
-                Err(_) => {
+            let Ok(record) = record else {
+                truncated = true;
+                break;
+            };
+            if let mcap::records::Record::Chunk { header, data } = record {
+                // A chunk counts only if it decodes whole.
+                let mut chunk_state = Collect::default();
+                let complete = match mcap::read::ChunkReader::new(header, &data) {
+                    Ok(chunk) => chunk.into_iter().all(|r| match r {
+                        Ok(r) => {
+                            chunk_state.record(r, &mut state);
+                            true
+                        }
+                        Err(_) => false,
+                    }),
+                    Err(_) => false,
+                };
+                if !complete {
                     truncated = true;
                     break;
                 }
-            };
-            match record {
-                mcap::records::Record::Schema { header, .. } => {
-                    schemas.insert(header.id, header.name.clone());
-                }
-                mcap::records::Record::Channel(c) => {
-                    if !channels.iter().any(|x| x.id == c.id) {
-                        channels.push(ChannelInfo {
-                            id: c.id,
-                            topic: c.topic.clone(),
-                            schema_name: schemas.get(&c.schema_id).cloned().unwrap_or_default(),
-                            encoding: c.message_encoding.clone(),
-                        });
-                    }
-                }
-                mcap::records::Record::Message { header, data } => {
-                    messages.push(StoredMessage {
-                        channel: header.channel_id,
-                        log_time: header.log_time,
-                        sequence: header.sequence,
-                        data: data.into_owned(),
-                    });
-                }
-                mcap::records::Record::Chunk { header, data } => {
-                    match mcap::read::ChunkReader::new(header, &data) {
-                        Ok(chunk) => {
-                            let mut chunk_ok = true;
-                            let mut in_chunk = Vec::new();
-                            for r in chunk {
-                                match r {
-                                    Ok(mcap::records::Record::Schema { header, .. }) => {
-                                        schemas.insert(header.id, header.name.clone());
-                                    }
-                                    Ok(mcap::records::Record::Channel(c)) => {
-                                        if !channels.iter().any(|x| x.id == c.id) {
-                                            channels.push(ChannelInfo {
-                                                id: c.id,
-                                                topic: c.topic.clone(),
-                                                schema_name: schemas
-                                                    .get(&c.schema_id)
-                                                    .cloned()
-                                                    .unwrap_or_default(),
-                                                encoding: c.message_encoding.clone(),
-                                            });
-                                        }
-                                    }
-                                    Ok(mcap::records::Record::Message { header, data }) => {
-                                        in_chunk.push(StoredMessage {
-                                            channel: header.channel_id,
-                                            log_time: header.log_time,
-                                            sequence: header.sequence,
-                                            data: data.into_owned(),
-                                        });
-                                    }
-                                    Ok(_) => {}
-                                    Err(_) => {
-                                        chunk_ok = false;
-                                        break;
-                                    }
-                                }
-                            }
-                            if !chunk_ok {
-                                truncated = true;
-                                break;
-                            }
-                            messages.extend(in_chunk);
-                        }
-                        Err(_) => {
-                            truncated = true;
-                            break;
-                        }
-                    }
-                }
-                mcap::records::Record::Metadata(m) => {
-                    metadata.insert(m.name.clone(), m.metadata.clone());
-                }
-                mcap::records::Record::DataEnd(_) | mcap::records::Record::Footer(_) => {}
-                _ => {}
+                state.messages.append(&mut chunk_state.messages);
+            } else {
+                let mut top = Collect::default();
+                top.record(record, &mut state);
+                state.messages.append(&mut top.messages);
             }
         }
+        let Collect {
+            channels,
+            messages,
+            metadata,
+            ..
+        } = state;
         Ok(Self {
             path: path.to_path_buf(),
             channels,

@@ -89,7 +89,6 @@ pub struct RecorderTask {
     taps: Vec<Box<dyn Tap>>,
     arena: Vec<u8>,
     batch: Vec<Pending>,
-    debug_delay: std::time::Duration,
     last_flush_mono_ns: u64,
 }
 
@@ -231,7 +230,6 @@ impl RecorderTask {
             taps,
             arena: Vec::with_capacity(1 << 20),
             batch: Vec::with_capacity(4096),
-            debug_delay: std::time::Duration::from_millis(scenario.recording.debug_delay_ms),
             last_flush_mono_ns: shoal_runtime::mono_ns(),
         })
     }
@@ -270,9 +268,6 @@ impl RecorderTask {
 
 impl Task for RecorderTask {
     fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
-        if !self.debug_delay.is_zero() {
-            std::thread::sleep(self.debug_delay);
-        }
         let ctx = (ctx.mode == shoal_runtime::Mode::Lockstep).then_some(ctx);
         self.drain(ctx)
     }

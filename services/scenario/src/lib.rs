@@ -136,8 +136,6 @@ pub struct Recording {
     pub chunk_kib: u64,
     /// The recorder's subscriber buffer per channel (samples).
     pub buffer: usize,
-    /// Test hook: the recorder sleeps this long per drain, so a tiny buffer overflows. 0 in real runs.
-    pub debug_delay_ms: u64,
 }
 
 impl Default for Recording {
@@ -146,7 +144,6 @@ impl Default for Recording {
             compression: Compression::Zstd,
             chunk_kib: 1024,
             buffer: 16,
-            debug_delay_ms: 0,
         }
     }
 }
@@ -732,6 +729,15 @@ const fn ipc_types_max_vehicles() -> usize {
     256
 }
 
+impl Scenario {
+    /// Reads and validates a scenario file.
+    pub fn from_file(path: &std::path::Path) -> Result<Self, ScenarioError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ScenarioError::Parse(format!("cannot read {}: {e}", path.display())))?;
+        Self::from_toml(&text)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -844,14 +850,5 @@ slot_m = [-8.0, -4.0, 0.0]
             }
             let _ = Scenario::from_toml(&t);
         }
-    }
-}
-
-impl Scenario {
-    /// Reads and validates a scenario file.
-    pub fn from_file(path: &std::path::Path) -> Result<Self, ScenarioError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| ScenarioError::Parse(format!("cannot read {}: {e}", path.display())))?;
-        Self::from_toml(&text)
     }
 }

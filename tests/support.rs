@@ -1,0 +1,145 @@
+//! Helpers for tests that run real shoal processes. Binaries are found next
+//! to the test executable's target directory (build them first with
+//! `cargo build --release`), or in `SHOAL_BIN_DIR`.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+/// Where the shoal binaries are.
+pub fn bin_dir() -> PathBuf {
+    if let Some(d) = std::env::var_os("SHOAL_BIN_DIR") {
+        return PathBuf::from(d);
+    }
+    // target/<profile>/deps/<test> -> target/<profile>
+    let exe = std::env::current_exe().expect("current exe");
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("target dir")
+        .to_path_buf();
+    assert!(
+        dir.join("shoal").is_file(),
+        "no shoal binary in {}: run `cargo build --release --workspace` before the tests, or set SHOAL_BIN_DIR",
+        dir.display()
+    );
+    dir
+}
+
+/// A `shoal` command.
+pub fn shoal() -> Command {
+    Command::new(bin_dir().join("shoal"))
+}
+
+/// Runs `shoal` with arguments and returns its output.
+pub fn run_shoal(args: &[&str]) -> Output {
+    shoal().args(args).output().expect("spawn shoal")
+}
+
+/// The repository root.
+pub fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+/// A small scenario: a leader and `followers` followers in a chain or pair,
+/// no obstacles, `duration_s` long.
+pub fn small_scenario(name: &str, duration_s: f64) -> String {
+    format!(
+        r#"
+name = "{name}"
+seed = 3
+duration_s = {duration_s:?}
+
+[[vehicles]]
+name = "L"
+
+[[vehicles]]
+name = "F1"
+parent = "L"
+slot_m = [-8.0, -4.0, 0.0]
+
+[[vehicles]]
+name = "F2"
+parent = "L"
+slot_m = [-8.0, 4.0, 0.0]
+
+[mission]
+waypoints_ned_m = [[200.0, 0.0, 10.0]]
+speed_mps = 1.0
+"#
+    )
+}
+
+/// Writes a scenario into `dir` and returns its path.
+pub fn write_scenario(dir: &Path, file: &str, text: &str) -> PathBuf {
+    let p = dir.join(file);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// Reads `run.json` of a live or finished run, waiting up to `timeout` for it.
+pub fn wait_run_json(out: &Path, timeout: Duration) -> serde_json::Value {
+    let start = Instant::now();
+    loop {
+        if let Ok(t) = std::fs::read_to_string(out.join("run.json")) {
+            if let Ok(v) = serde_json::from_str(&t) {
+                return v;
+            }
+        }
+        assert!(
+            start.elapsed() < timeout,
+            "run.json never appeared in {}",
+            out.display()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Pids of processes whose command line mentions `needle`.
+pub fn processes_mentioning(needle: &str) -> Vec<(i32, String)> {
+    let mut out = Vec::new();
+    if let Ok(entries) = std::fs::read_dir("/proc") {
+        for e in entries.flatten() {
+            let Ok(pid) = e.file_name().to_string_lossy().parse::<i32>() else {
+                continue;
+            };
+            if let Ok(cmd) = std::fs::read(e.path().join("cmdline")) {
+                let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
+                if cmd.contains(needle) && pid != std::process::id() as i32 {
+                    // Zombies have an empty cmdline; a listed process is alive.
+                    out.push((pid, cmd));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Sends a signal.
+#[allow(unsafe_code)]
+pub fn signal(pid: u32, sig: i32) {
+    // SAFETY: kill has no memory effects.
+    unsafe {
+        libc::kill(pid as i32, sig);
+    }
+}
+
+/// Python 3 with the third-party readers, or a failing assertion that says
+/// how to install them (tests never skip).
+pub fn python() -> Command {
+    let py = std::env::var("SHOAL_PYTHON").unwrap_or_else(|_| "python3".into());
+    let ok = Command::new(&py)
+        .args(["-c", "import mcap, mcap_ros2"])
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false);
+    assert!(
+        ok,
+        "{py} with `mcap` and `mcap-ros2-support` is required: pip install -r tests/requirements.txt"
+    );
+    Command::new(py)
+}
