@@ -106,6 +106,9 @@ pub enum BeaconStatus {
     OutsideImage,
     /// Farther than the water's visibility range.
     BeyondRange,
+    /// The camera is outside the light's emission cone (seen from the wrong
+    /// side, see [`BeaconLayout`]).
+    FacingAway,
     /// Hidden behind an occluder.
     Occluded,
 }
@@ -177,12 +180,46 @@ impl Camera {
     /// The checks, in order: in front of the camera; inside the image
     /// (`0 ≤ u ≤ width`, `0 ≤ v ≤ height`); within the visibility range
     /// (straight-line distance from the camera centre); the segment from the
-    /// camera centre to the point crosses no occluder capsule.
-    pub fn beacon_status(
+    /// camera centre to the point crosses no occluder capsule. (A beacon's
+    /// emission cone is checked by [`Self::beacon_status`].)
+    pub fn point_status(
         &self,
         cam_world: &Isometry3<f64>,
         p_world: &Point3<f64>,
         occluders: &[Capsule],
+    ) -> (BeaconStatus, [f64; 2]) {
+        self.status(cam_world, p_world, occluders, || true)
+    }
+
+    /// Whether beacon `index` of `layout`, on a parent at `parent_pose`
+    /// (body → NED), is seen by a camera at `cam_world`: as
+    /// [`Self::point_status`], plus the emission cone (checked after the
+    /// range, before occlusion).
+    pub fn beacon_status(
+        &self,
+        cam_world: &Isometry3<f64>,
+        parent_pose: &Isometry3<f64>,
+        layout: &BeaconLayout,
+        index: usize,
+        occluders: &[Capsule],
+    ) -> (BeaconStatus, [f64; 2]) {
+        let Some(b) = layout.positions_body_m.get(index) else {
+            return (BeaconStatus::OutsideImage, [0.0; 2]);
+        };
+        let b = Point3::from(*b);
+        let viewer =
+            parent_pose.inverse_transform_point(&Point3::from(cam_world.translation.vector));
+        self.status(cam_world, &(parent_pose * b), occluders, || {
+            layout.shines_towards(&b, &viewer)
+        })
+    }
+
+    fn status(
+        &self,
+        cam_world: &Isometry3<f64>,
+        p_world: &Point3<f64>,
+        occluders: &[Capsule],
+        shines: impl FnOnce() -> bool,
     ) -> (BeaconStatus, [f64; 2]) {
         let p_cam = cam_world.inverse_transform_point(p_world);
         let Some(px) = self.project(&p_cam) else {
@@ -194,6 +231,9 @@ impl Camera {
         if p_cam.coords.norm() > self.range_m {
             return (BeaconStatus::BeyondRange, [0.0; 2]);
         }
+        if !shines() {
+            return (BeaconStatus::FacingAway, [0.0; 2]);
+        }
         let centre = Point3::from(cam_world.translation.vector);
         if occluders.iter().any(|c| c.blocks_segment(&centre, p_world)) {
             return (BeaconStatus::Occluded, [0.0; 2]);
@@ -204,7 +244,8 @@ impl Camera {
     /// What the camera physically sees.
     ///
     /// A beacon counts only if it is in front of the camera, inside the
-    /// image, within `visibility_range_m`, and not hidden by any occluder
+    /// image, within `visibility_range_m`, seen from inside its light's
+    /// emission cone ([`BeaconLayout`]), and not hidden by any occluder
     /// capsule: the segment from the camera centre to the beacon is tested
     /// against every capsule in `occluders`. Pass every other vehicle's hull
     /// there, but **not** the parent's own hull (its beacons sit on its
@@ -226,12 +267,16 @@ impl Camera {
         rng: &mut R,
     ) -> BeaconObservation {
         let cam_world = self.camera_in_world(follower_pose);
+        let viewer =
+            parent_pose.inverse_transform_point(&Point3::from(cam_world.translation.vector));
         let mut obs = BeaconObservation::default();
         for (i, b) in layout.points().enumerate() {
             let nu: f64 = StandardNormal.sample(rng);
             let nv: f64 = StandardNormal.sample(rng);
             let p_world = parent_pose * b;
-            let (status, px) = self.beacon_status(&cam_world, &p_world, occluders);
+            let (status, px) = self.status(&cam_world, &p_world, occluders, || {
+                layout.shines_towards(&b, &viewer)
+            });
             if status == BeaconStatus::Visible {
                 obs.visible[i] = true;
                 obs.pixels[i] = [px[0] + self.noise_px * nu, px[1] + self.noise_px * nv];

@@ -180,6 +180,15 @@ impl CameraConfig {
 /// | 2 | starboard fin tip | `[-1.25, 0.40, 0.00]` |
 /// | 3 | port fin tip | `[-1.25, -0.40, 0.00]` |
 ///
+/// The lights shine aft: each is seen only from within
+/// `emission_half_angle_deg` (default 100°, a little more than a hemisphere,
+/// as for a light standing proud of the tail cone or a fin tip) of
+/// `facing_body` (default `[-1, 0, 0]`, aft). Set the half-angle to 180 for
+/// omnidirectional lights. The camera model hides a beacon seen from outside
+/// its cone, and the pose solver uses the same fact to reject a mirrored
+/// solution that would put the camera where the lights cannot be seen (for
+/// instance in front of the parent); see [`crate::PoseConfig::emission_margin_deg`].
+///
 /// Why: (1) they are **not coplanar** (beacon 1 stands 0.4 m off the plane of
 /// the other three), and four non-coplanar points with known identities have
 /// one PnP solution, whereas four coplanar points admit the two-fold
@@ -193,6 +202,12 @@ impl CameraConfig {
 pub struct BeaconLayout {
     /// Beacon positions in the parent's body frame, m. 3 to [`MAX_BEACONS`].
     pub positions_body_m: Vec<[f64; 3]>,
+    /// Direction the lights shine towards, parent body frame (need not be
+    /// unit length). Default `[-1, 0, 0]`: aft.
+    pub facing_body: [f64; 3],
+    /// Half-angle of each light's emission cone about `facing_body`,
+    /// degrees, in (0, 180]; 180 = seen from everywhere. Default 100.
+    pub emission_half_angle_deg: f64,
 }
 
 impl Default for BeaconLayout {
@@ -204,6 +219,8 @@ impl Default for BeaconLayout {
                 [-1.25, 0.40, 0.00],
                 [-1.25, -0.40, 0.00],
             ],
+            facing_body: [-1.0, 0.0, 0.0],
+            emission_half_angle_deg: 100.0,
         }
     }
 }
@@ -222,6 +239,19 @@ impl BeaconLayout {
         }
         for p in &self.positions_body_m {
             finite3("beacons.positions_body_m", p)?;
+        }
+        finite3("beacons.facing_body", &self.facing_body)?;
+        if Vector3::from(self.facing_body).norm() < 1e-9 {
+            return Err(invalid(
+                "beacons.facing_body",
+                format!("must not be zero, got {:?}", self.facing_body),
+            ));
+        }
+        if !(self.emission_half_angle_deg > 0.0 && self.emission_half_angle_deg <= 180.0) {
+            return Err(invalid(
+                "beacons.emission_half_angle_deg",
+                format!("must be in (0, 180], got {}", self.emission_half_angle_deg),
+            ));
         }
         let pts = self.points_vec();
         for i in 0..n {
@@ -264,6 +294,23 @@ impl BeaconLayout {
         self.points().collect()
     }
 
+    /// Unit facing direction (parent body frame).
+    pub fn facing_unit(&self) -> Vector3<f64> {
+        Vector3::from(self.facing_body)
+            .try_normalize(1e-12)
+            .unwrap_or_else(|| Vector3::new(-1.0, 0.0, 0.0))
+    }
+
+    /// True if a light at `beacon` (parent body frame) can be seen from
+    /// `viewer` (parent body frame): within the emission cone.
+    pub fn shines_towards(&self, beacon: &Point3<f64>, viewer: &Point3<f64>) -> bool {
+        cone_contains(
+            &self.facing_unit(),
+            self.emission_half_angle_deg.to_radians().cos(),
+            &(viewer - beacon),
+        )
+    }
+
     /// True if every beacon lies within `tol_m` of one plane (then PnP may
     /// have two solutions; the previous estimate picks one).
     pub fn is_coplanar(&self, tol_m: f64) -> bool {
@@ -283,6 +330,16 @@ impl BeaconLayout {
         // Smallest eigenvalue = sum of squared distances to the best plane.
         (min.max(0.0) / n as f64).sqrt() <= tol_m
     }
+}
+
+/// True if `d` lies within the cone of axis `axis` (unit) whose half-angle
+/// has cosine `cos_half` (a half-angle of 180° contains everything).
+pub(crate) fn cone_contains(axis: &Vector3<f64>, cos_half: f64, d: &Vector3<f64>) -> bool {
+    if cos_half <= -1.0 + 1e-12 {
+        return true;
+    }
+    let n = d.norm();
+    n > 0.0 && axis.dot(d) >= cos_half * n
 }
 
 /// A vehicle's hull as a capsule (cylinder with hemispherical ends) whose
@@ -352,6 +409,10 @@ pub struct PoseConfig {
     /// Convergence: a step smaller than this, relative (translation relative
     /// to the range; rotation in rad), ends the refinement. Default 1e-10.
     pub convergence_tol: f64,
+    /// Convergence: an accepted step that lowers the sum of squared
+    /// reprojection errors by less than this fraction ends the refinement.
+    /// Default 1e-9 (far below what pixel noise can resolve).
+    pub relative_cost_tol: f64,
     /// A fit whose RMS reprojection error exceeds this is invalid, px.
     /// Default 4.0 (about 8σ at the default 1 px noise with 4 beacons).
     pub max_reprojection_rms_px: f64,
@@ -360,6 +421,19 @@ pub struct PoseConfig {
     /// the previous estimate is taken (this rejects the mirrored / flipped
     /// solution). Default 9 (3σ).
     pub ambiguity_chi2: f64,
+    /// P3P is run on this many visible triples (those with the largest image
+    /// triangles), 1 to 4; each gives up to four starting poses. More triples
+    /// find more of the local minima at long range, at some 5-10 µs each;
+    /// on the default layout a second triple changed nothing measurable in
+    /// the OpenCV comparison (`tests/opencv_compare.rs`). Default 1.
+    pub p3p_triples: usize,
+    /// A candidate pose that puts the camera more than this many degrees
+    /// outside a used beacon's emission cone ([`BeaconLayout`]) is rejected:
+    /// the lights could not have been seen from there. This is what rejects
+    /// the mirrored solution when there is no previous estimate. The margin
+    /// absorbs the pose error of a true fit near the cone's edge.
+    /// Default 10.
+    pub emission_margin_deg: f64,
     /// Smallest pixel σ used for the covariance, px: the covariance uses
     /// `σ = max(camera.noise_px, pixel_sigma_floor_px)`. Default 0.3.
     pub pixel_sigma_floor_px: f64,
@@ -371,8 +445,11 @@ impl Default for PoseConfig {
             min_beacons: 4,
             max_iterations: 50,
             convergence_tol: 1e-10,
+            relative_cost_tol: 1e-9,
             max_reprojection_rms_px: 4.0,
             ambiguity_chi2: 9.0,
+            p3p_triples: 1,
+            emission_margin_deg: 10.0,
             pixel_sigma_floor_px: 0.3,
         }
     }
@@ -399,6 +476,12 @@ impl PoseConfig {
                 format!("must be in (0, 0.01), got {}", self.convergence_tol),
             ));
         }
+        if !(self.relative_cost_tol >= 0.0 && self.relative_cost_tol < 1e-2) {
+            return Err(invalid(
+                "pose.relative_cost_tol",
+                format!("must be in [0, 0.01), got {}", self.relative_cost_tol),
+            ));
+        }
         if self.max_reprojection_rms_px.is_nan() || self.max_reprojection_rms_px <= 0.0 {
             return Err(invalid(
                 "pose.max_reprojection_rms_px",
@@ -409,6 +492,22 @@ impl PoseConfig {
             return Err(invalid(
                 "pose.ambiguity_chi2",
                 format!("must be >= 0 and finite, got {}", self.ambiguity_chi2),
+            ));
+        }
+        if !(1..=crate::pnp::MAX_P3P_TRIPLES).contains(&self.p3p_triples) {
+            return Err(invalid(
+                "pose.p3p_triples",
+                format!(
+                    "must be in [1, {}], got {}",
+                    crate::pnp::MAX_P3P_TRIPLES,
+                    self.p3p_triples
+                ),
+            ));
+        }
+        if !(self.emission_margin_deg >= 0.0 && self.emission_margin_deg <= 180.0) {
+            return Err(invalid(
+                "pose.emission_margin_deg",
+                format!("must be in [0, 180], got {}", self.emission_margin_deg),
             ));
         }
         if !(self.pixel_sigma_floor_px > 0.0 && self.pixel_sigma_floor_px.is_finite()) {

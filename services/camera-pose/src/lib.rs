@@ -58,7 +58,7 @@ mod poly;
 
 pub use camera::{BeaconObservation, BeaconStatus, Camera, Capsule};
 pub use config::{BeaconLayout, CameraConfig, CameraError, HullConfig, PoseConfig};
-pub use pnp::{follower_in_parent, parent_in_body, PoseEstimate, PoseEstimator};
+pub use pnp::{follower_in_parent, parent_in_body, PoseEstimate, PoseEstimator, MAX_P3P_TRIPLES};
 
 /// Most beacons on one parent (the IPC `beacons` sample has room for 8).
 pub const MAX_BEACONS: usize = 8;

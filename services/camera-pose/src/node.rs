@@ -35,7 +35,9 @@ pub struct CameraTask {
 impl CameraTask {
     pub fn new(rt: &Runtime, scenario: &Scenario) -> anyhow::Result<Self> {
         let me = &rt.args().vehicle;
-        let index = scenario.vehicle_index(me).context("vehicle not in scenario")?;
+        let index = scenario
+            .vehicle_index(me)
+            .context("vehicle not in scenario")?;
         let parent_name = scenario.vehicles[index]
             .parent
             .as_ref()

@@ -8,21 +8,31 @@
 //! reprojection errors `Σ |π(R B_i + t) − P_i|²` (the maximum-likelihood
 //! estimate under Gaussian pixel noise), found numerically as the paper says:
 //!
-//! 1. **Global start — exhaustive P3P.** The three visible beacons that span
-//!    the largest triangle in the image give, by Grunert's elimination, a
-//!    quartic whose real roots are all the poses (up to four) that fit those
-//!    three exactly. The quartic is derived in [`p3p`]; its roots are found by
-//!    a bracketing solver that cannot lose a root to cancellation.
-//! 2. **Refinement — Levenberg–Marquardt** on the reprojection error of
-//!    *every* visible beacon, from each P3P pose and from the previous
-//!    estimate (warm start). The parameters are the translation `t` and a
-//!    rotation vector `ω` applied on the left, `R ← exp([ω]×) R`; Marquardt's
-//!    diagonal scaling and Nielsen's damping update.
-//! 3. **Choice.** The converged fit with the lowest cost wins, except that
-//!    fits whose costs differ by less than `ambiguity_chi2 · σ²` cannot be
-//!    told apart by the pixels: among those, the one nearest the previous
-//!    estimate is taken. This is how the mirrored / flipped solution is
-//!    rejected. With exactly three beacons every P3P pose fits exactly, so
+//! 1. **Global starts.** (a) *Exhaustive P3P*: the three visible beacons that
+//!    span the largest triangle in the image give, by Grunert's elimination,
+//!    a quartic whose real roots are all the poses (up to four) that fit
+//!    those three exactly ([`p3p`]; roots by a bracketing solver that cannot
+//!    lose a root to cancellation). (b) *POSIT* (scaled orthographic, then
+//!    corrected for perspective) when four or more non-coplanar beacons are
+//!    visible: P3P's quartic degenerates for a distant target (all bearings
+//!    nearly parallel), which is where POSIT is best. (c) The previous
+//!    estimate. If none of these converges to an acceptable fit, P3P is
+//!    repeated on the next-largest triangles (up to [`MAX_P3P_TRIPLES`]).
+//! 2. **Refinement — damped Newton (Levenberg–Marquardt form)** on the
+//!    reprojection error of *every* visible beacon, from each start. The
+//!    parameters are the translation and a rotation vector `ω` applied on
+//!    the left, `R ← exp([ω]×) R`, about the centroid of the visible beacons
+//!    (which decouples rotation from translation). The exact Hessian (not
+//!    only Gauss–Newton's `JᵀJ`) keeps convergence quadratic in the flat,
+//!    curved valleys of long-range fits, where Gauss–Newton crawls.
+//! 3. **Choice.** A converged fit is *acceptable* if it puts the camera
+//!    inside every used beacon's emission cone (widened by
+//!    `emission_margin_deg`): lights that shine aft cannot be seen from in
+//!    front. Among acceptable fits the lowest cost wins, except that fits
+//!    whose costs differ by less than `ambiguity_chi2 · σ²` cannot be told
+//!    apart by the pixels: among those, the one nearest the previous
+//!    estimate is taken. These two rules reject the mirrored / flipped
+//!    solution. With exactly three beacons every P3P pose fits exactly, so
 //!    without a previous estimate more than one candidate means invalid.
 //!
 //! The covariance of `[position, rotation vector]` is `(JᵀJ)⁻¹ σ²` at the
@@ -33,11 +43,16 @@ use nalgebra::{
     Isometry3, Matrix3, Matrix6, Point3, Rotation3, Translation3, UnitQuaternion, Vector3, Vector6,
 };
 
+use crate::config::cone_contains;
 use crate::poly::{real_roots, MAX_ROOTS};
 use crate::{BeaconLayout, BeaconObservation, CameraConfig, CameraError, PoseConfig, MAX_BEACONS};
 
-/// Most starts refined per call: four P3P poses and the previous estimate.
-const MAX_STARTS: usize = MAX_ROOTS + 1;
+/// Most P3P triples tried per call ([`PoseConfig::p3p_triples`]).
+pub const MAX_P3P_TRIPLES: usize = 4;
+
+/// Most starts refined per call: four P3P poses per triple, the POSIT pose
+/// and the previous estimate.
+const MAX_STARTS: usize = MAX_P3P_TRIPLES * MAX_ROOTS + 2;
 
 /// The parent's pose as the follower's camera measured it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -130,9 +145,15 @@ pub struct PoseEstimator {
     sigma_px: f64,
     layout: [Point3<f64>; MAX_BEACONS],
     layout_count: usize,
+    /// Unit direction the lights shine towards (parent body frame).
+    facing: Vector3<f64>,
+    /// Cosine of the emission half-angle plus the margin.
+    cone_cos: f64,
     previous: Option<(UnitQuaternion<f64>, Vector3<f64>)>,
-    // Scratch: the visible beacons of the current call.
+    // Scratch: the visible beacons of the current call, relative to their
+    // centroid `centroid` (parent body frame).
     obj: [Point3<f64>; MAX_BEACONS],
+    centroid: Vector3<f64>,
     pix: [[f64; 2]; MAX_BEACONS],
     n: usize,
 }
@@ -171,8 +192,14 @@ impl PoseEstimator {
             sigma_px: camera.noise_px.max(pose.pixel_sigma_floor_px),
             layout: pts,
             layout_count: count,
+            facing: layout.facing_unit(),
+            cone_cos: (layout.emission_half_angle_deg + pose.emission_margin_deg)
+                .min(180.0)
+                .to_radians()
+                .cos(),
             previous: None,
             obj: [Point3::origin(); MAX_BEACONS],
+            centroid: Vector3::zeros(),
             pix: [[0.0; 2]; MAX_BEACONS],
             n: 0,
         })
@@ -188,32 +215,66 @@ impl PoseEstimator {
         self.previous.is_some()
     }
 
-    /// Estimates the parent's pose from one observation. Beacons are matched
-    /// by index with the layout; non-finite pixels are ignored.
-    pub fn estimate(&mut self, obs: &BeaconObservation) -> PoseEstimate {
+    /// Copies the visible beacons into the scratch arrays, relative to their
+    /// centroid (rotating about the centroid rather than the parent's origin,
+    /// 1.25 m away for the default layout, decouples rotation from
+    /// translation and removes the long curved valley that otherwise slows
+    /// Levenberg–Marquardt at long range).
+    fn load(&mut self, obs: &BeaconObservation) {
         self.n = 0;
         let count = obs.count.min(self.layout_count);
+        let mut sum = Vector3::zeros();
         for i in 0..count {
             let [u, v] = obs.pixels[i];
             if obs.visible[i] && u.is_finite() && v.is_finite() {
                 self.obj[self.n] = self.layout[i];
                 self.pix[self.n] = [u, v];
+                sum += self.layout[i].coords;
                 self.n += 1;
             }
         }
+        self.centroid = if self.n > 0 {
+            sum / self.n as f64
+        } else {
+            Vector3::zeros()
+        };
+        for p in &mut self.obj[..self.n] {
+            *p -= self.centroid;
+        }
+    }
+
+    /// Parent-origin pose `(R, t)` from a centred one `(R, t')`: `t = t' − R c`.
+    fn to_origin(&self, q: &UnitQuaternion<f64>, t_c: &Vector3<f64>) -> Vector3<f64> {
+        t_c - q * self.centroid
+    }
+
+    /// Estimates the parent's pose from one observation. Beacons are matched
+    /// by index with the layout; non-finite pixels are ignored.
+    pub fn estimate(&mut self, obs: &BeaconObservation) -> PoseEstimate {
+        self.load(obs);
         let n = self.n;
         if n < self.cfg.min_beacons {
             return PoseEstimate::invalid(n, 0.0, 0);
         }
 
-        // Starts: P3P poses, then the previous estimate.
+        // Starts: POSIT (good in the far field, where P3P is ill-conditioned),
+        // the previous estimate, and P3P on the largest image triangles;
+        // further triangles only if nothing fitted.
         let mut starts = [(UnitQuaternion::identity(), Vector3::zeros()); MAX_STARTS];
-        let mut n_starts = self.p3p_starts(&mut starts);
-        let n_p3p = n_starts;
-        if let Some(prev) = self.previous {
-            starts[n_starts] = prev;
+        let mut n_starts = 0;
+        if let Some(start) = self.posit() {
+            starts[n_starts] = start;
             n_starts += 1;
         }
+        if let Some((q, t)) = self.previous {
+            starts[n_starts] = (q, t + q * self.centroid);
+            n_starts += 1;
+        }
+        let mut triangles = [(0, 1, 2); MAX_P3P_TRIPLES];
+        let n_triangles = self.largest_triangles(&mut triangles);
+        let mut stage_end = self.cfg.p3p_triples.min(n_triangles);
+        let mut next_triangle = 0;
+        let mut n_p3p = 0;
 
         let mut fits = [Fit {
             q: UnitQuaternion::identity(),
@@ -222,14 +283,31 @@ impl PoseEstimator {
             iterations: 0,
             converged: false,
         }; MAX_STARTS];
+        let mut usable = [false; MAX_STARTS];
         let mut best: Option<usize> = None;
-        for k in 0..n_starts {
-            let (q, t) = starts[k];
-            fits[k] = self.refine(q, t);
-            let f = &fits[k];
-            if f.converged && f.cost.is_finite() && best.is_none_or(|b| f.cost < fits[b].cost) {
-                best = Some(k);
+        let mut refined = 0;
+        loop {
+            while next_triangle < stage_end {
+                let got = self.p3p_starts(triangles[next_triangle], &mut starts[n_starts..]);
+                n_starts += got;
+                n_p3p += got;
+                next_triangle += 1;
             }
+            for k in refined..n_starts {
+                let (q, t) = starts[k];
+                fits[k] = self.refine(q, t);
+                fits[k].t = self.to_origin(&fits[k].q, &fits[k].t);
+                let f = &fits[k];
+                usable[k] = f.converged && f.cost.is_finite() && self.sees_the_lights(f);
+                if usable[k] && best.is_none_or(|b| f.cost < fits[b].cost) {
+                    best = Some(k);
+                }
+            }
+            refined = n_starts;
+            if best.is_some() || stage_end >= n_triangles {
+                break;
+            }
+            stage_end = n_triangles;
         }
         let Some(best) = best else {
             let (cost, iters) = fits[..n_starts].iter().filter(|f| f.cost.is_finite()).fold(
@@ -252,7 +330,7 @@ impl PoseEstimator {
         let mut n_alternatives = 0;
         let mut nearest = f64::INFINITY;
         for (k, f) in fits[..n_starts].iter().enumerate() {
-            if !(f.converged && f.cost <= best_fit.cost + margin) {
+            if !(usable[k] && f.cost <= best_fit.cost + margin) {
                 continue;
             }
             if k != best && pose_distance(f, &best_fit.q, &best_fit.t) > 1e-6 {
@@ -282,18 +360,23 @@ impl PoseEstimator {
         }
 
         // Covariance (JᵀJ)⁻¹σ² in the camera frame, then in the body frame.
-        let Some((_, h, _)) = self.normal_equations(&fit.q, &fit.t) else {
+        // Parameters of the fit: centred translation t' and ω; the origin's
+        // translation is t = t' − R c, so δt = δt' + [R c]× δω.
+        let rc = fit.q * self.centroid;
+        let Some(model) = self.normal_equations(&fit.q, &(fit.t + rc)) else {
             return PoseEstimate::invalid(n, rms, fit.iterations);
         };
-        let Some(chol) = h.cholesky() else {
+        let Some(chol) = model.jtj.cholesky() else {
             return PoseEstimate::invalid(n, rms, fit.iterations);
         };
-        let cov_cam = chol.inverse() * (self.sigma_px * self.sigma_px);
+        let cov_centred = chol.inverse() * (self.sigma_px * self.sigma_px);
         let r_cf = self.camera_in_body.rotation.to_rotation_matrix();
         let mut g = Matrix6::zeros();
         g.fixed_view_mut::<3, 3>(0, 0).copy_from(r_cf.matrix());
+        g.fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&(r_cf.matrix() * rc.cross_matrix()));
         g.fixed_view_mut::<3, 3>(3, 3).copy_from(r_cf.matrix());
-        let covariance = g * cov_cam * g.transpose();
+        let covariance = g * cov_centred * g.transpose();
         if !covariance.iter().all(|c| c.is_finite()) {
             return PoseEstimate::invalid(n, rms, fit.iterations);
         }
@@ -313,12 +396,12 @@ impl PoseEstimator {
         }
     }
 
-    /// P3P on the visible triple with the largest image triangle; writes up to
-    /// four poses into `out` and returns how many.
-    fn p3p_starts(&self, out: &mut [(UnitQuaternion<f64>, Vector3<f64>); MAX_STARTS]) -> usize {
+    /// The visible triples with the largest image triangles, largest first
+    /// (at most [`MAX_P3P_TRIPLES`]); returns how many.
+    fn largest_triangles(&self, out: &mut [(usize, usize, usize); MAX_P3P_TRIPLES]) -> usize {
         let n = self.n;
-        let mut best = (0, 1, 2);
-        let mut best_area = -1.0;
+        let mut area_of = [-1.0_f64; MAX_P3P_TRIPLES];
+        let mut count = 0;
         for i in 0..n {
             for j in i + 1..n {
                 for k in j + 1..n {
@@ -326,20 +409,124 @@ impl PoseEstimator {
                     let [uj, vj] = self.pix[j];
                     let [uk, vk] = self.pix[k];
                     let area = ((uj - ui) * (vk - vi) - (uk - ui) * (vj - vi)).abs();
-                    if area > best_area {
-                        best_area = area;
-                        best = (i, j, k);
+                    let mut slot = count.min(MAX_P3P_TRIPLES);
+                    while slot > 0 && area > area_of[slot - 1] {
+                        slot -= 1;
+                    }
+                    if slot < MAX_P3P_TRIPLES {
+                        for m in (slot + 1..MAX_P3P_TRIPLES).rev() {
+                            out[m] = out[m - 1];
+                            area_of[m] = area_of[m - 1];
+                        }
+                        out[slot] = (i, j, k);
+                        area_of[slot] = area;
+                        count = (count + 1).min(MAX_P3P_TRIPLES);
                     }
                 }
             }
         }
-        let (i, j, k) = best;
+        count
+    }
+
+    /// P3P on one triple of visible beacons; writes up to four poses
+    /// (centred coordinates) into `out` and returns how many.
+    fn p3p_starts(
+        &self,
+        (i, j, k): (usize, usize, usize),
+        out: &mut [(UnitQuaternion<f64>, Vector3<f64>)],
+    ) -> usize {
         let f = [self.bearing(i), self.bearing(j), self.bearing(k)];
         let p = [self.obj[i], self.obj[j], self.obj[k]];
         let mut poses = [(UnitQuaternion::identity(), Vector3::zeros()); MAX_ROOTS];
-        let m = p3p(&p, &f, &mut poses);
-        out[..m].copy_from_slice(&poses[..m]);
-        m
+        let got = p3p(&p, &f, &mut poses).min(out.len());
+        out[..got].copy_from_slice(&poses[..got]);
+        got
+    }
+
+    /// POSIT (DeMenthon & Davis, IJCV 1995): pose from a scaled orthographic
+    /// projection, corrected iteratively for perspective. Needs four or more
+    /// beacons not in one plane; returns a pose in centred coordinates.
+    ///
+    /// P3P's quartic degenerates as the bearings become parallel (a distant
+    /// target seen under a small angle, where every depth ratio tends to 1);
+    /// POSIT is at its best exactly there, so the two starts complement each
+    /// other.
+    fn posit(&self) -> Option<(UnitQuaternion<f64>, Vector3<f64>)> {
+        let n = self.n;
+        if n < 4 {
+            return None;
+        }
+        let m0 = self.obj[0].coords;
+        let mut ata = Matrix3::zeros();
+        for p in &self.obj[1..n] {
+            let a = p.coords - m0;
+            ata += a * a.transpose();
+        }
+        // Refuse (nearly) coplanar beacons: the object matrix is singular.
+        let eig = ata.symmetric_eigenvalues();
+        let (lo, hi) = (eig.min(), eig.max());
+        if !(lo > 1e-6 * hi && hi > 0.0) {
+            return None;
+        }
+        let ata_inv = ata.try_inverse()?;
+        let norm = |i: usize| {
+            [
+                (self.pix[i][0] - self.principal_px[0]) / self.focal_px,
+                (self.pix[i][1] - self.principal_px[1]) / self.focal_px,
+            ]
+        };
+        let [x0, y0] = norm(0);
+        let mut eps = [0.0; MAX_BEACONS];
+        let mut rows = (Vector3::x(), Vector3::y(), Vector3::z());
+        let mut z0 = 1.0;
+        for _ in 0..50 {
+            let mut bi = Vector3::zeros();
+            let mut bj = Vector3::zeros();
+            for (m, e) in eps.iter().enumerate().take(n).skip(1) {
+                let a = self.obj[m].coords - m0;
+                let [x, y] = norm(m);
+                bi += a * (x * (1.0 + e) - x0);
+                bj += a * (y * (1.0 + e) - y0);
+            }
+            let vi = ata_inv * bi;
+            let vj = ata_inv * bj;
+            let (ni, nj) = (vi.norm(), vj.norm());
+            if !(ni > 0.0 && nj > 0.0 && ni.is_finite() && nj.is_finite()) {
+                return None;
+            }
+            let i = vi / ni;
+            let j = (vj - i * vj.dot(&i)).try_normalize(1e-12)?;
+            let k = i.cross(&j);
+            z0 = 1.0 / (ni * nj).sqrt();
+            rows = (i, j, k);
+            let mut change: f64 = 0.0;
+            for (p, e) in self.obj.iter().zip(eps.iter_mut()).take(n).skip(1) {
+                let new = (p.coords - m0).dot(&k) / z0;
+                change = change.max((new - *e).abs());
+                *e = new;
+            }
+            if change < 1e-12 {
+                break;
+            }
+        }
+        let r = Matrix3::from_rows(&[rows.0.transpose(), rows.1.transpose(), rows.2.transpose()]);
+        let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+        let t = Vector3::new(x0 * z0, y0 * z0, z0) - rot * m0;
+        t.iter().all(|c| c.is_finite()).then_some((rot, t))
+    }
+
+    /// True if the camera, at the pose `fit` implies, is within every used
+    /// beacon's emission cone widened by `emission_margin_deg`.
+    fn sees_the_lights(&self, fit: &Fit) -> bool {
+        if self.cone_cos <= -1.0 + 1e-12 {
+            return true;
+        }
+        // Camera centre in the parent frame: −Rᵀ t (as eq. 1).
+        let viewer = -(fit.q.inverse() * fit.t);
+        self.obj[..self.n].iter().all(|b| {
+            let d = viewer - (b.coords + self.centroid);
+            cone_contains(&self.facing, self.cone_cos, &d)
+        })
     }
 
     fn bearing(&self, i: usize) -> Vector3<f64> {
@@ -351,18 +538,17 @@ impl PoseEstimator {
         .normalize()
     }
 
-    /// Sum of squared residuals, `JᵀJ` and `Jᵀr` at a pose; `None` if a
-    /// beacon is not in front of the camera.
-    fn normal_equations(
-        &self,
-        q: &UnitQuaternion<f64>,
-        t: &Vector3<f64>,
-    ) -> Option<(f64, Matrix6<f64>, Vector6<f64>)> {
+    /// The local model of the cost at a pose (centred coordinates); `None`
+    /// if a beacon is not in front of the camera.
+    fn normal_equations(&self, q: &UnitQuaternion<f64>, t: &Vector3<f64>) -> Option<Model> {
         let r: Matrix3<f64> = q.to_rotation_matrix().into_inner();
         let f = self.focal_px;
-        let mut cost = 0.0;
-        let mut h = Matrix6::zeros();
-        let mut g = Vector6::zeros();
+        let mut m = Model {
+            cost: 0.0,
+            jtj: Matrix6::zeros(),
+            hessian: Matrix6::zeros(),
+            gradient: Vector6::zeros(),
+        };
         for i in 0..self.n {
             let w = r * self.obj[i].coords; // R B
             let x = w + t;
@@ -372,7 +558,7 @@ impl PoseEstimator {
             let iz = 1.0 / x.z;
             let ru = self.principal_px[0] + f * x.x * iz - self.pix[i][0];
             let rv = self.principal_px[1] + f * x.y * iz - self.pix[i][1];
-            cost += ru * ru + rv * rv;
+            m.cost += ru * ru + rv * rv;
             // d(u, v)/dX, then d/dω = (R B) × (d/dX).
             let au = Vector3::new(f * iz, 0.0, -f * x.x * iz * iz);
             let av = Vector3::new(0.0, f * iz, -f * x.y * iz * iz);
@@ -380,10 +566,33 @@ impl PoseEstimator {
             let cv = w.cross(&av);
             let ju = Vector6::new(au.x, au.y, au.z, cu.x, cu.y, cu.z);
             let jv = Vector6::new(av.x, av.y, av.z, cv.x, cv.y, cv.z);
-            h += ju * ju.transpose() + jv * jv.transpose();
-            g += ju * ru + jv * rv;
+            m.jtj += ju * ju.transpose() + jv * jv.transpose();
+            m.gradient += ju * ru + jv * rv;
+            // Second-order term Σ r ∇²r: the projection's curvature seen
+            // through dX/dp = [I | −[w]×], plus the rotation's own curvature
+            // (exp(ω)w ≈ w + ω×w + ½ω×(ω×w)) in the ω–ω block.
+            let f2 = f * iz * iz;
+            let mut c = Matrix3::zeros();
+            c[(0, 2)] = -ru * f2;
+            c[(2, 0)] = -ru * f2;
+            c[(1, 2)] = -rv * f2;
+            c[(2, 1)] = -rv * f2;
+            c[(2, 2)] = 2.0 * f2 * iz * (ru * x.x + rv * x.y);
+            let mut jx = nalgebra::Matrix3x6::zeros();
+            jx.fixed_view_mut::<3, 3>(0, 0)
+                .copy_from(&Matrix3::identity());
+            jx.fixed_view_mut::<3, 3>(0, 3)
+                .copy_from(&(-w.cross_matrix()));
+            let a = au * ru + av * rv;
+            let rot =
+                0.5 * (a * w.transpose() + w * a.transpose()) - Matrix3::identity() * a.dot(&w);
+            let mut s2 = jx.transpose() * c * jx;
+            let mut blk = s2.fixed_view_mut::<3, 3>(3, 3);
+            blk += rot;
+            m.hessian += s2;
         }
-        Some((cost, h, g))
+        m.hessian += m.jtj;
+        Some(m)
     }
 
     fn cost(&self, q: &UnitQuaternion<f64>, t: &Vector3<f64>) -> f64 {
@@ -403,10 +612,19 @@ impl PoseEstimator {
         cost
     }
 
-    /// Levenberg–Marquardt on the reprojection error from `(q, t)`.
+    /// Damped Newton (Levenberg–Marquardt form) on the reprojection error
+    /// from `(q, t)`, centred coordinates.
+    ///
+    /// The step solves `(H + μD) δ = −g` with `H` the exact Hessian of
+    /// `½Σ|r|²` (Gauss–Newton's `JᵀJ` plus `Σ r ∇²r`) and `D = diag(JᵀJ)`;
+    /// `μ` follows Nielsen's rule and grows until `H + μD` is positive
+    /// definite. Far from a minimum this behaves like gradient descent, close
+    /// to it like Newton. Plain Gauss–Newton converges only linearly on the
+    /// flat, curved valleys of long-range, noisy fits (residuals not small
+    /// against the weak curvature); the exact Hessian keeps it quadratic.
     fn refine(&self, mut q: UnitQuaternion<f64>, mut t: Vector3<f64>) -> Fit {
         let tol = self.cfg.convergence_tol;
-        let Some((mut cost, mut h, mut g)) = self.normal_equations(&q, &t) else {
+        let Some(mut m) = self.normal_equations(&q, &t) else {
             return Fit {
                 q,
                 t,
@@ -421,25 +639,28 @@ impl PoseEstimator {
         let mut it = 0;
         while it < self.cfg.max_iterations {
             it += 1;
-            if cost <= 1e-24 * self.focal_px * self.focal_px {
+            if m.cost <= 1e-24 * self.focal_px * self.focal_px {
                 converged = true;
                 break;
             }
-            let mut d = h.diagonal();
+            let mut d = m.jtj.diagonal();
             let dmax = d.max();
             for di in d.iter_mut() {
                 *di = di.max(1e-12 * dmax + 1e-300);
             }
-            let mut a = h;
+            let mut a = m.hessian;
             for k in 0..6 {
                 a[(k, k)] += mu * d[k];
             }
             let Some(chol) = a.cholesky() else {
-                mu *= nu;
+                mu = (mu * nu).max(1e-6);
                 nu *= 2.0;
+                if !mu.is_finite() || mu > 1e16 {
+                    break;
+                }
                 continue;
             };
-            let step = chol.solve(&(-g));
+            let step = chol.solve(&(-m.gradient));
             let dt = Vector3::new(step[0], step[1], step[2]);
             let dw = Vector3::new(step[3], step[4], step[5]);
             if dt.norm() <= tol * (t.norm() + tol) && dw.norm() <= tol {
@@ -449,33 +670,26 @@ impl PoseEstimator {
             let q_new = UnitQuaternion::from_scaled_axis(dw) * q;
             let t_new = t + dt;
             let cost_new = self.cost(&q_new, &t_new);
-            // Predicted decrease of ½‖r‖²: ½ δᵀ(μDδ − g).
-            let mut pred = 0.0;
-            for k in 0..6 {
-                pred += step[k] * (mu * d[k] * step[k] - g[k]);
-            }
-            pred *= 0.5;
-            let actual = 0.5 * (cost - cost_new);
+            // Predicted decrease of ½‖r‖² by the quadratic model.
+            let pred = -(m.gradient.dot(&step) + 0.5 * step.dot(&(m.hessian * step)));
+            let actual = 0.5 * (m.cost - cost_new);
             if cost_new.is_finite() && actual > 0.0 {
                 let rho = if pred > 0.0 { actual / pred } else { 1.0 };
                 q = q_new;
                 t = t_new;
                 match self.normal_equations(&q, &t) {
-                    Some((c, hh, gg)) => {
-                        cost = c;
-                        h = hh;
-                        g = gg;
-                    }
+                    Some(next) => m = next,
                     None => break,
                 }
                 mu *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
                 nu = 2.0;
-                if actual <= 1e-15 * 0.5 * cost {
+                // A decrease the pixels cannot resolve: done.
+                if actual <= self.cfg.relative_cost_tol * 0.5 * (m.cost + actual) {
                     converged = true;
                     break;
                 }
             } else {
-                mu *= nu;
+                mu = (mu * nu).max(1e-9);
                 nu *= 2.0;
                 if !mu.is_finite() || mu > 1e16 {
                     // No descent direction left: a (numerical) minimum.
@@ -487,11 +701,24 @@ impl PoseEstimator {
         Fit {
             q,
             t,
-            cost,
+            cost: m.cost,
             iterations: it,
             converged,
         }
     }
+}
+
+/// Quadratic model of `½Σ|r|²` at a pose.
+#[derive(Debug, Clone, Copy)]
+struct Model {
+    /// `Σ|r|²`, px².
+    cost: f64,
+    /// Gauss–Newton matrix `JᵀJ`.
+    jtj: Matrix6<f64>,
+    /// Exact Hessian `JᵀJ + Σ r ∇²r`.
+    hessian: Matrix6<f64>,
+    /// `Jᵀr`.
+    gradient: Vector6<f64>,
 }
 
 /// Distance between a fit and a pose: rotation angle (rad) plus translation
@@ -566,6 +793,7 @@ fn p3p(
         }
         let u = (nq[0] + nq[1] * v + nq[2] * v * v) / d;
         let q = 1.0 + v * v - 2.0 * v * cb;
+
         if u <= 0.0 || q <= 0.0 {
             continue;
         }

@@ -1,5 +1,6 @@
 //! PnP and frames: exactness on noise-free pixels, eqs. (1) and (3) by hand,
 //! validity rules, flip rejection, covariance.
+#![allow(clippy::expect_used, clippy::unwrap_used, clippy::panic)] // test code
 
 mod common;
 
@@ -305,6 +306,7 @@ fn config_errors_name_the_key() {
         .starts_with("pose.min_beacons"));
     let bad = BeaconLayout {
         positions_body_m: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
+        ..BeaconLayout::default()
     };
     assert!(bad.validate().unwrap_err().to_string().contains("one line"));
     let bad = HullConfig {
@@ -353,4 +355,68 @@ fn default_layout_is_not_coplanar_and_has_real_spread() {
     assert!((0.6..=0.9).contains(&spread), "spread {spread}");
     // All at the stern half of a 3 m hull.
     assert!(pts.iter().all(|p| p.x <= -0.9));
+}
+
+/// Heading errors above 90°: the mirrored solution was taken.
+fn flips(layout: &BeaconLayout, pose_cfg: &PoseConfig, seed: u64) -> (usize, usize) {
+    let cfg = camera_cfg(2.0);
+    let camera = Camera::new(&cfg).unwrap();
+    let mut est = PoseEstimator::new(pose_cfg, &cfg, layout).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (mut n, mut flipped) = (0, 0);
+    while n < 1000 {
+        let parent = parent_pose_in_view(&camera, 15.0, 30.0, 60.0, &mut rng);
+        let Some(obs) = observe_all(&camera, &parent, &BeaconLayout::default(), &mut rng) else {
+            continue;
+        };
+        n += 1;
+        est.reset();
+        let e = est.estimate(&obs);
+        if e.valid
+            && angle_diff(yaw(&e.parent_in_body.rotation), yaw(&parent.rotation))
+                > std::f64::consts::FRAC_PI_2
+        {
+            flipped += 1;
+        }
+    }
+    (n, flipped)
+}
+
+#[test]
+fn emission_cones_reject_the_mirrored_solution_without_history() {
+    // 15 m, 2 px: the hardest corner of the OpenCV comparison grid. The
+    // pixels come from the default (aft-facing) lights in both runs; only
+    // what the solver is told about the cones differs.
+    let (n, with_cones) = flips(&BeaconLayout::default(), &PoseConfig::default(), 17);
+    let omni = BeaconLayout {
+        emission_half_angle_deg: 180.0,
+        ..BeaconLayout::default()
+    };
+    let (_, without) = flips(&omni, &PoseConfig::default(), 17);
+    // A mirror image seen from inside the cones cannot be rejected this way,
+    // so expect fewer flips, not none.
+    assert!(
+        with_cones * 3 <= without * 2,
+        "flips with cones {with_cones}, without {without}, of {n}"
+    );
+    assert!(
+        with_cones * 100 <= 4 * n,
+        "flips with cones {with_cones} of {n}"
+    );
+}
+
+#[test]
+fn far_isosceles_triangle_that_defeats_p3p_is_still_solved() {
+    // Found by the property test: 14 m away, the largest image triangle is
+    // the isosceles tail tip + fin tips, whose P3P quartic is ≈ (v − 1)⁴.
+    let cfg = camera_cfg(0.0);
+    let camera = Camera::new(&cfg).unwrap();
+    let layout = BeaconLayout::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(4_947_791_915_583_478_361);
+    let parent = parent_pose_in_view(&camera, 14.140_567_588_036_47, 35.0, 80.0, &mut rng);
+    let obs = observe_all(&camera, &parent, &layout, &mut rng).unwrap();
+    let mut est = PoseEstimator::new(&PoseConfig::default(), &cfg, &layout).unwrap();
+    let e = est.estimate(&obs);
+    assert!(e.valid);
+    assert!((e.parent_in_body.translation.vector - parent.translation.vector).norm() < 1e-6);
 }

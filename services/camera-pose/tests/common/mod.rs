@@ -1,4 +1,5 @@
 //! Shared helpers for the integration tests.
+#![allow(clippy::expect_used, clippy::unwrap_used, clippy::panic)] // test code
 #![allow(dead_code)]
 
 use camera_pose::{BeaconLayout, BeaconObservation, Camera, CameraConfig};
