@@ -19,9 +19,11 @@
 //!   descent.
 //! * **Line of sight**: for each follower `j`, its parent `P` and any third vehicle `k`, the
 //!   distance from `k` to the segment `j → P` stays `≥ occlusion_radius_m` (hull radius plus
-//!   the beacons' spread). This is not convex; it is minimised by a coordinate search over
-//!   `λ ∈ {0, ¼, ½, ¾, 1}` from five starts (all 0, all 1, all ½, and the two sides at
-//!   opposite ends), after a bounding-box test that discards most triples.
+//!   the beacons' spread). With `P` the parent this is `min over μ, λ` of
+//!   `|(k − P) − μ (j − P)|`: for each fixed `μ` a convex problem of the same kind, solved
+//!   exactly; over `μ` the minimum is bounded interval by interval with its Lipschitz
+//!   constant (a sound lower bound, to 1 cm), after a bounding-box test that discards
+//!   far-apart triples.
 //! * **Visibility range**: `|j − P| ≤ visibility_range_m` at both ends of `j`'s segment.
 //!
 //! # Assignment
@@ -241,10 +243,19 @@ fn segment(slot: &Vector3<f64>, d: (f64, f64)) -> Vector3<f64> {
 }
 
 /// min over λ ∈ [0,1]ⁿ of |c + Σ λ_k w_k| (convex; cyclic coordinate descent).
-fn min_norm_box(c: &Vector3<f64>, cols: &[Vector3<f64>]) -> f64 {
+///
+/// Stops early with a lower bound once that bound reaches `enough` (the caller only needs
+/// to know the minimum is at least that): for any unit `u`,
+/// `|c + Wλ| ≥ u·c + Σ min(0, u·w_k)` on the whole box.
+fn min_norm_box(c: &Vector3<f64>, cols: &[Vector3<f64>], enough: f64) -> f64 {
+    let lower_bound =
+        |u: &Vector3<f64>| u.dot(c) + cols.iter().map(|w| u.dot(w).min(0.0)).sum::<f64>();
+    if c.norm() > 0.0 && lower_bound(&c.normalize()) >= enough {
+        return enough;
+    }
     let mut lambda = vec![0.0; cols.len()];
     let mut r = *c;
-    for _ in 0..200 {
+    for sweep in 0..200 {
         let mut moved = 0.0f64;
         for (k, w) in cols.iter().enumerate() {
             let ww = w.norm_squared();
@@ -262,19 +273,11 @@ fn min_norm_box(c: &Vector3<f64>, cols: &[Vector3<f64>]) -> f64 {
         if moved < 1e-12 {
             break;
         }
+        if sweep % 4 == 3 && r.norm() > 0.0 && lower_bound(&r.normalize()) >= enough {
+            return enough;
+        }
     }
     r.norm()
-}
-
-fn point_segment_distance(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
-    let ab = b - a;
-    let l2 = ab.norm_squared();
-    let t = if l2 > 0.0 {
-        ((p - a).dot(&ab) / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p - (a + ab * t)).norm()
 }
 
 struct Geometry<'a> {
@@ -305,8 +308,9 @@ impl Geometry<'_> {
         (lo, hi)
     }
 
-    /// Smallest distance between vehicles `i` and `j` over all displacements.
-    fn pair_distance(&self, i: usize, j: usize) -> f64 {
+    /// Smallest distance between vehicles `i` and `j` over all displacements (or a value
+    /// `≥ enough` once it is known to be at least that).
+    fn pair_distance(&self, i: usize, j: usize, enough: f64) -> f64 {
         let (ci, cj) = (&self.tree.chain[i], &self.tree.chain[j]);
         let common = ci.iter().zip(cj.iter()).take_while(|(a, b)| a == b).count();
         let mut c = Vector3::zeros();
@@ -319,10 +323,16 @@ impl Geometry<'_> {
             c -= self.tree.slots[k + 1];
             cols.push(-self.wk(k));
         }
-        min_norm_box(&c, &cols)
+        min_norm_box(&c, &cols, enough)
     }
 
-    /// Smallest distance from `k` to the line of sight `j → parent(j)`.
+    /// Smallest distance from `k` to the line of sight `j → parent(j)` over all
+    /// displacements (or a value `≥ radius` once it is known to be at least that).
+    ///
+    /// With `P` the parent, the distance is `min over μ ∈ [0, 1]` of
+    /// `|(k − P) − μ (j − P)|`; for a fixed `μ` that is affine in every `λ`, so the minimum
+    /// over `λ` is the convex problem of [`min_norm_box`]. Over `μ` the minimum is bounded
+    /// below interval by interval with its Lipschitz constant (certified to 1 cm).
     fn sight_clearance(&self, j: usize, k: usize, radius: f64) -> f64 {
         let p = self.tree.parent[j];
         // bounding-box rejection
@@ -334,69 +344,73 @@ impl Geometry<'_> {
         if gap >= radius {
             return gap;
         }
-        // variables: displacements below the ancestors that j, its parent and k share
-        let (cj, cp, ck) = (
-            &self.tree.chain[j],
-            &self.tree.chain[p],
-            &self.tree.chain[k],
-        );
+        let (cp, ck) = (&self.tree.chain[p], &self.tree.chain[k]);
         let common = cp.iter().zip(ck.iter()).take_while(|(a, b)| a == b).count();
-        let mut vars: Vec<usize> = cj[common..].to_vec();
-        let nj = vars.len();
-        for &f in &ck[common..] {
-            if !vars.contains(&f) {
-                vars.push(f);
+        let jf = j - 1; // j's own follower index (j is never the leader here)
+                        // k − P = c0 + Σ λ a_f ;  j − P = S_j + λ_j w_j
+        let mut vars: Vec<(usize, Vector3<f64>)> = Vec::new();
+        let mut c0 = Vector3::zeros();
+        let mut add = |f: usize, sign: f64, vars: &mut Vec<(usize, Vector3<f64>)>| {
+            c0 += self.tree.slots[f + 1] * sign;
+            let w = self.wk(f) * sign;
+            match vars.iter_mut().find(|(g, _)| *g == f) {
+                Some((_, acc)) => *acc += w,
+                None => vars.push((f, w)),
             }
-        }
-        let n = vars.len();
-        let pos_of = |v: usize, lam: &[f64]| {
-            let mut acc = Vector3::zeros();
-            for &f in &self.tree.chain[v][common..] {
-                let l = vars.iter().position(|x| *x == f).map_or(0.0, |i| lam[i]);
-                acc += self.tree.slots[f + 1] + self.wk(f) * l;
-            }
-            acc
         };
-        let eval =
-            |lam: &[f64]| point_segment_distance(&pos_of(k, lam), &pos_of(j, lam), &pos_of(p, lam));
-        let levels = [0.0, 0.25, 0.5, 0.75, 1.0];
-        let starts: [Box<dyn Fn(usize) -> f64>; 5] = [
-            Box::new(|_| 0.0),
-            Box::new(|_| 1.0),
-            Box::new(|_| 0.5),
-            Box::new(move |i| if i < nj { 1.0 } else { 0.0 }),
-            Box::new(move |i| if i < nj { 0.0 } else { 1.0 }),
-        ];
-        let mut best = f64::INFINITY;
-        let mut lam = vec![0.0; n];
-        for start in &starts {
-            for (i, l) in lam.iter_mut().enumerate() {
-                *l = start(i);
-            }
-            let mut cur = eval(&lam);
-            for _ in 0..10 {
-                let mut improved = false;
-                for i in 0..n {
-                    let keep = lam[i];
-                    let mut best_l = keep;
-                    for &l in &levels {
-                        lam[i] = l;
-                        let v = eval(&lam);
-                        if v < cur - 1e-12 {
-                            cur = v;
-                            best_l = l;
-                            improved = true;
-                        }
-                    }
-                    lam[i] = best_l;
-                }
-                if !improved {
-                    break;
-                }
-            }
-            best = best.min(cur);
+        for &f in &ck[common..] {
+            add(f, 1.0, &mut vars);
         }
-        best
+        for &f in &cp[common..] {
+            add(f, -1.0, &mut vars);
+        }
+        if !vars.iter().any(|(g, _)| *g == jf) {
+            vars.push((jf, Vector3::zeros()));
+        }
+        let s_j = self.tree.slots[j];
+        let w_j = self.wk(jf);
+        let mut cols = vec![Vector3::zeros(); vars.len()];
+        // g(μ) = min over λ is Lipschitz in μ with constant max|j − P| ≤ `lip`, so an interval
+        // [a, b] is certified clear when min(g(a), g(b)) − lip·(b − a)/2 ≥ radius; otherwise
+        // it is split, down to 1 cm along the line of sight.
+        let lip = s_j.norm().max((s_j + w_j).norm()).max(1e-9);
+        let grid = 8usize;
+        let h0 = 1.0 / grid as f64;
+        let enough = radius + lip * h0 / 2.0 + 1e-9;
+        let mut at = |mu: f64| {
+            for (col, (f, a)) in cols.iter_mut().zip(&vars) {
+                *col = if *f == jf { a - w_j * mu } else { *a };
+            }
+            min_norm_box(&(c0 - s_j * mu), &cols, enough)
+        };
+        let mut g_min = f64::INFINITY;
+        let mut stack: Vec<(f64, f64, f64, f64)> = Vec::with_capacity(64);
+        let mut prev = (0.0, at(0.0));
+        g_min = g_min.min(prev.1);
+        for i in 1..=grid {
+            let mu = i as f64 * h0;
+            let g = at(mu);
+            g_min = g_min.min(g);
+            stack.push((prev.0, prev.1, mu, g));
+            prev = (mu, g);
+        }
+        let mut bound = f64::INFINITY;
+        while let Some((a, ga, b, gb)) = stack.pop() {
+            let lb = ga.min(gb) - lip * (b - a) / 2.0;
+            if lb >= radius {
+                continue;
+            }
+            if lip * (b - a) < 0.01 {
+                bound = bound.min(lb.max(0.0));
+                continue;
+            }
+            let m = 0.5 * (a + b);
+            let gm = at(m);
+            g_min = g_min.min(gm);
+            stack.push((a, ga, m, gm));
+            stack.push((m, gm, b, gb));
+        }
+        g_min.min(bound)
     }
 
     /// Every constraint between follower vehicle `v` and the vehicles already assigned;
@@ -438,7 +452,7 @@ impl Geometry<'_> {
             let (bl, bh) = self.bbox(u);
             let gap = (al - bh).sup(&(bl - ah)).sup(&Vector3::zeros()).norm();
             if gap < d_min {
-                let d = self.pair_distance(v, u);
+                let d = self.pair_distance(v, u, d_min);
                 if d < d_min {
                     note(
                         d_min - d,
