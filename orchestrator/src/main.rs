@@ -90,8 +90,7 @@ fn cmd_run(cmd: RunCmd) -> anyhow::Result<()> {
     if let Some(d) = cmd.duration {
         scenario.duration_s = d;
     }
-    scenario.validate().context("scenario refused")?;
-    check::check(&scenario).context("scenario refused")?;
+    check::resolve(&mut scenario).context("scenario refused")?;
     let bin_dir = match cmd.bin_dir {
         Some(d) => d,
         None => std::env::current_exe()?
@@ -214,14 +213,24 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.cmd {
         Cmd::Run(cmd) => cmd_run(cmd),
-        Cmd::Check { scenario } => load_scenario(&scenario).and_then(|s| {
-            check::check(&s)?;
+        Cmd::Check { scenario } => load_scenario(&scenario).and_then(|mut s| {
+            check::resolve(&mut s)?;
             println!(
                 "{}: ok ({} vehicles, {} processes)",
                 s.name,
                 s.vehicles.len(),
                 s.processes().len()
             );
+            for v in s.vehicles.iter().filter(|v| v.parent.is_some()) {
+                println!(
+                    "  {:<8} follows {:<8} slot {:?} m  D_a {:.2} m  D_b {:+.2} m",
+                    v.name,
+                    v.parent.as_deref().unwrap_or(""),
+                    v.slot_m.unwrap_or_default(),
+                    v.d_a_m.unwrap_or(0.0),
+                    v.d_b_m.unwrap_or(0.0)
+                );
+            }
             Ok(())
         }),
         Cmd::Inspect { recording, json } => cmd_inspect(recording, json),

@@ -13,60 +13,21 @@ use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, 
 use shoal_scenario::Scenario;
 
 /// The follower configuration of one vehicle: the scenario's shared
-/// `[follower]` section, its slot, D_min from the safety distance, and D_a,
-/// D_b as given or as assigned from the whole formation.
+/// `[follower]` section, its slot, D_min from the safety distance, and the
+/// D_a, D_b that `shoal run` resolved for it (given or assigned from the
+/// whole formation, see `shoal check`).
 pub fn follower_config(scenario: &Scenario, name: &str) -> anyhow::Result<FollowerConfig> {
     let mut cfg: FollowerConfig = scenario.section("follower")?;
     let spec = scenario.vehicle(name).context("vehicle not in scenario")?;
     cfg.slot_in_parent_m = spec.slot_m.context("a follower needs slot_m")?;
     cfg.d_min_m = scenario.safety.safe_distance_m;
-    let (d_a, d_b) = displacements(scenario)?
-        .into_iter()
-        .find(|(n, _)| n == name)
-        .map(|(_, d)| d)
-        .context("follower missing from the formation")?;
-    cfg.d_a_m = spec.d_a_m.unwrap_or(d_a);
-    cfg.d_b_m = spec.d_b_m.unwrap_or(d_b);
+    cfg.d_a_m = spec
+        .d_a_m
+        .context("d_a_m not resolved: start the planner through `shoal run`")?;
+    cfg.d_b_m = spec
+        .d_b_m
+        .context("d_b_m not resolved: start the planner through `shoal run`")?;
     Ok(cfg)
-}
-
-/// `(name, (D_a, D_b))` of every follower, assigned from the formation.
-pub fn displacements(scenario: &Scenario) -> anyhow::Result<Vec<(String, (f64, f64))>> {
-    let followers: Vec<planner::formation::FollowerSlot> = scenario
-        .vehicles
-        .iter()
-        .filter_map(|v| {
-            Some(planner::formation::FollowerSlot {
-                name: v.name.clone(),
-                parent: v.parent.clone()?,
-                slot_in_parent_m: v.slot_m?,
-            })
-        })
-        .collect();
-    let camera: camera_visibility::Visibility = scenario.section("camera")?;
-    let params = planner::formation::FormationParams {
-        visibility_range_m: camera.visibility_range_m,
-        ..Default::default()
-    };
-    let d = planner::formation::assign_displacements(
-        &scenario.leader().name,
-        &followers,
-        scenario.safety.safe_distance_m,
-        &params,
-    )?;
-    Ok(followers.into_iter().map(|f| f.name).zip(d).collect())
-}
-
-/// Only the visibility range of the `[camera]` section matters here.
-mod camera_visibility {
-    #[derive(serde::Deserialize)]
-    pub struct Visibility {
-        #[serde(default = "default_range")]
-        pub visibility_range_m: f64,
-    }
-    fn default_range() -> f64 {
-        12.0
-    }
 }
 
 enum Role {
