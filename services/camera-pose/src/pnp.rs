@@ -257,22 +257,22 @@ impl PoseEstimator {
             return PoseEstimate::invalid(n, 0.0, 0);
         }
 
-        // Starts: POSIT (good in the far field, where P3P is ill-conditioned),
-        // the previous estimate, and P3P on the largest image triangles;
-        // further triangles only if nothing fitted.
+        // Starts, in stages: (0) the previous estimate; (1) POSIT (good in
+        // the far field, where P3P is ill-conditioned) and P3P on the
+        // largest image triangles; (2) P3P on further triangles, only if
+        // nothing fitted. Stage 1 is skipped while tracking when the warm
+        // fit's cost is within the ambiguity margin: no other minimum could
+        // then be better by more than the margin, so the choice below would
+        // keep the fit nearest the previous estimate anyway.
+        let margin = self.cfg.ambiguity_chi2 * self.sigma_px * self.sigma_px;
         let mut starts = [(UnitQuaternion::identity(), Vector3::zeros()); MAX_STARTS];
         let mut n_starts = 0;
-        if let Some(start) = self.posit() {
-            starts[n_starts] = start;
-            n_starts += 1;
-        }
         if let Some((q, t)) = self.previous {
-            starts[n_starts] = (q, t + q * self.centroid);
-            n_starts += 1;
+            starts[0] = (q, t + q * self.centroid);
+            n_starts = 1;
         }
         let mut triangles = [(0, 1, 2); MAX_P3P_TRIPLES];
         let n_triangles = self.largest_triangles(&mut triangles);
-        let mut stage_end = self.cfg.p3p_triples.min(n_triangles);
         let mut next_triangle = 0;
         let mut n_p3p = 0;
 
@@ -286,13 +286,8 @@ impl PoseEstimator {
         let mut usable = [false; MAX_STARTS];
         let mut best: Option<usize> = None;
         let mut refined = 0;
+        let mut stage = 0;
         loop {
-            while next_triangle < stage_end {
-                let got = self.p3p_starts(triangles[next_triangle], &mut starts[n_starts..]);
-                n_starts += got;
-                n_p3p += got;
-                next_triangle += 1;
-            }
             for k in refined..n_starts {
                 let (q, t) = starts[k];
                 fits[k] = self.refine(q, t);
@@ -304,10 +299,25 @@ impl PoseEstimator {
                 }
             }
             refined = n_starts;
-            if best.is_some() || stage_end >= n_triangles {
-                break;
+            let stage_end = match stage {
+                0 if best.is_some_and(|b| fits[b].cost <= margin) => break,
+                0 => {
+                    if let Some(start) = self.posit() {
+                        starts[n_starts] = start;
+                        n_starts += 1;
+                    }
+                    self.cfg.p3p_triples.min(n_triangles)
+                }
+                1 if best.is_none() && next_triangle < n_triangles => n_triangles,
+                _ => break,
+            };
+            stage += 1;
+            while next_triangle < stage_end {
+                let got = self.p3p_starts(triangles[next_triangle], &mut starts[n_starts..]);
+                n_starts += got;
+                n_p3p += got;
+                next_triangle += 1;
             }
-            stage_end = n_triangles;
         }
         let Some(best) = best else {
             let (cost, iters) = fits[..n_starts].iter().filter(|f| f.cost.is_finite()).fold(
@@ -324,7 +334,6 @@ impl PoseEstimator {
         };
 
         // Fits that the pixels cannot tell apart from the best one.
-        let margin = self.cfg.ambiguity_chi2 * self.sigma_px * self.sigma_px;
         let best_fit = fits[best];
         let mut chosen = best;
         let mut n_alternatives = 0;
@@ -578,18 +587,20 @@ impl PoseEstimator {
             c[(1, 2)] = -rv * f2;
             c[(2, 1)] = -rv * f2;
             c[(2, 2)] = 2.0 * f2 * iz * (ru * x.x + rv * x.y);
-            let mut jx = nalgebra::Matrix3x6::zeros();
-            jx.fixed_view_mut::<3, 3>(0, 0)
-                .copy_from(&Matrix3::identity());
-            jx.fixed_view_mut::<3, 3>(0, 3)
-                .copy_from(&(-w.cross_matrix()));
+            // With W = −[w]×: [I W]ᵀ C [I W] = [[C, CW], [(CW)ᵀ, WᵀCW]].
+            let wx = w.cross_matrix();
+            let cw = -(c * wx);
             let a = au * ru + av * rv;
             let rot =
                 0.5 * (a * w.transpose() + w * a.transpose()) - Matrix3::identity() * a.dot(&w);
-            let mut s2 = jx.transpose() * c * jx;
-            let mut blk = s2.fixed_view_mut::<3, 3>(3, 3);
-            blk += rot;
-            m.hessian += s2;
+            let mut tt = m.hessian.fixed_view_mut::<3, 3>(0, 0);
+            tt += c;
+            let mut tw = m.hessian.fixed_view_mut::<3, 3>(0, 3);
+            tw += cw;
+            let mut wt = m.hessian.fixed_view_mut::<3, 3>(3, 0);
+            wt += cw.transpose();
+            let mut ww = m.hessian.fixed_view_mut::<3, 3>(3, 3);
+            ww += wx * cw + rot;
         }
         m.hessian += m.jtj;
         Some(m)

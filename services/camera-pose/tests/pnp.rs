@@ -420,3 +420,74 @@ fn far_isosceles_triangle_that_defeats_p3p_is_still_solved() {
     assert!(e.valid);
     assert!((e.parent_in_body.translation.vector - parent.translation.vector).norm() < 1e-6);
 }
+
+#[test]
+fn tracking_a_moving_parent_stays_valid_and_never_flips() {
+    // 30 s at 10 Hz, 1 px noise, the parent weaving 5-11 m ahead; the
+    // estimator keeps its previous estimate between frames.
+    let cfg = camera_cfg(1.0);
+    let camera = Camera::new(&cfg).unwrap();
+    let layout = BeaconLayout::default();
+    let mut est = PoseEstimator::new(&PoseConfig::default(), &cfg, &layout).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(23);
+    let mut worst_heading: f64 = 0.0;
+    for k in 0..300 {
+        let t = f64::from(k) * 0.1;
+        let parent = Isometry3::new(
+            Vector3::new(
+                1.4 + 8.0 + 3.0 * (0.25 * t).sin(),
+                2.0 * (0.15 * t).sin(),
+                0.5,
+            ),
+            Vector3::new(0.0, 0.05 * (0.3 * t).sin(), 0.5 * (0.15 * t).cos()),
+        );
+        let obs = camera.observe(&Isometry3::identity(), &parent, &layout, &[], &mut rng);
+        assert_eq!(obs.visible_count(), 4, "frame {k}");
+        let e = est.estimate(&obs);
+        assert!(e.valid, "frame {k}: {e:?}");
+        let err = angle_diff(yaw(&e.parent_in_body.rotation), yaw(&parent.rotation));
+        worst_heading = worst_heading.max(err);
+        // 3σ of the covariance's position part bounds the error.
+        let d = e.parent_in_body.translation.vector - parent.translation.vector;
+        let cov = e.covariance.fixed_view::<3, 3>(0, 0).into_owned();
+        let m = d.dot(&(cov.try_inverse().unwrap() * d));
+        assert!(m < 30.0, "frame {k}: Mahalanobis² {m}");
+    }
+    assert!(
+        worst_heading.to_degrees() < 30.0,
+        "worst heading error {}°",
+        worst_heading.to_degrees()
+    );
+}
+
+#[test]
+fn a_wrong_track_is_abandoned_when_the_pixels_contradict_it() {
+    // Seed the estimator with a wrong previous estimate (the parent 3 m off
+    // and turned 90°), then show it the true parent: the warm start cannot
+    // fit, so the global starts take over.
+    let cfg = camera_cfg(1.0);
+    let camera = Camera::new(&cfg).unwrap();
+    let layout = BeaconLayout::default();
+    let mut est = PoseEstimator::new(&PoseConfig::default(), &cfg, &layout).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(29);
+    let wrong = Isometry3::new(
+        Vector3::new(1.4 + 9.0, 3.0, 0.0),
+        Vector3::new(0.0, 0.0, 1.2),
+    );
+    let obs = camera.observe(&Isometry3::identity(), &wrong, &layout, &[], &mut rng);
+    assert!(est.estimate(&obs).valid);
+    let truth = Isometry3::new(
+        Vector3::new(1.4 + 7.0, 0.0, 0.0),
+        Vector3::new(0.0, 0.0, -0.3),
+    );
+    let obs = camera.observe(&Isometry3::identity(), &truth, &layout, &[], &mut rng);
+    let e = est.estimate(&obs);
+    assert!(e.valid);
+    // The same answer as an estimator with no history.
+    let mut fresh = PoseEstimator::new(&PoseConfig::default(), &cfg, &layout).unwrap();
+    let f = fresh.estimate(&obs);
+    assert!(f.valid);
+    let d = (e.parent_in_body.translation.vector - f.parent_in_body.translation.vector).norm();
+    assert!(d < 1e-6, "differs from a cold solve by {d} m");
+    assert!(angle_diff(yaw(&e.parent_in_body.rotation), yaw(&truth.rotation)) < 0.2);
+}
