@@ -10,8 +10,8 @@
 //!   range, occlusion by other vehicles' hulls ([`Capsule`]), pixel noise.
 //!   Its output, [`BeaconObservation`], is what goes on the `beacons` channel.
 //! - [`PoseEstimator::estimate`] solves the parent's pose from that
-//!   observation alone (PnP, eq. 2: P3P start + Levenberg–Marquardt, see
-//!   [`pnp`](crate::PoseEstimator)), converts it into the follower body frame
+//!   observation alone (PnP, eq. 2: POSIT and P3P starts, then
+//!   Levenberg–Marquardt; see [`PoseEstimator`]), converts it into the follower body frame
 //!   (eq. 3) and gives the follower's position in the parent's frame (eq. 1).
 //!   Its output, [`PoseEstimate`], is what goes on `leader_pose`; it says
 //!   `valid = false` rather than guess.

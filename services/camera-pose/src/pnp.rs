@@ -1,43 +1,4 @@
 //! The parent's pose from beacon pixels: PnP (eq. 2), then eqs. (3) and (1).
-//!
-//! # Method
-//!
-//! Eq. (2) of the paper binds each beacon's pixel `P_i` to the parent's pose
-//! in the camera frame, `X_Bi^C = R_L^C B_i + X_L^C`, `P_i = π(X_Bi^C)` with
-//! `π` the pinhole projection. The pose minimises the sum of squared
-//! reprojection errors `Σ |π(R B_i + t) − P_i|²` (the maximum-likelihood
-//! estimate under Gaussian pixel noise), found numerically as the paper says:
-//!
-//! 1. **Global starts.** (a) *Exhaustive P3P*: the three visible beacons that
-//!    span the largest triangle in the image give, by Grunert's elimination,
-//!    a quartic whose real roots are all the poses (up to four) that fit
-//!    those three exactly ([`p3p`]; roots by a bracketing solver that cannot
-//!    lose a root to cancellation). (b) *POSIT* (scaled orthographic, then
-//!    corrected for perspective) when four or more non-coplanar beacons are
-//!    visible: P3P's quartic degenerates for a distant target (all bearings
-//!    nearly parallel), which is where POSIT is best. (c) The previous
-//!    estimate. If none of these converges to an acceptable fit, P3P is
-//!    repeated on the next-largest triangles (up to [`MAX_P3P_TRIPLES`]).
-//! 2. **Refinement — damped Newton (Levenberg–Marquardt form)** on the
-//!    reprojection error of *every* visible beacon, from each start. The
-//!    parameters are the translation and a rotation vector `ω` applied on
-//!    the left, `R ← exp([ω]×) R`, about the centroid of the visible beacons
-//!    (which decouples rotation from translation). The exact Hessian (not
-//!    only Gauss–Newton's `JᵀJ`) keeps convergence quadratic in the flat,
-//!    curved valleys of long-range fits, where Gauss–Newton crawls.
-//! 3. **Choice.** A converged fit is *acceptable* if it puts the camera
-//!    inside every used beacon's emission cone (widened by
-//!    `emission_margin_deg`): lights that shine aft cannot be seen from in
-//!    front. Among acceptable fits the lowest cost wins, except that fits
-//!    whose costs differ by less than `ambiguity_chi2 · σ²` cannot be told
-//!    apart by the pixels: among those, the one nearest the previous
-//!    estimate is taken. These two rules reject the mirrored / flipped
-//!    solution. With exactly three beacons every P3P pose fits exactly, so
-//!    without a previous estimate more than one candidate means invalid.
-//!
-//! The covariance of `[position, rotation vector]` is `(JᵀJ)⁻¹ σ²` at the
-//! solution (Gauss–Newton approximation), `σ = max(camera.noise_px,
-//! pose.pixel_sigma_floor_px)`, rotated into the follower body frame.
 
 use nalgebra::{
     Isometry3, Matrix3, Matrix6, Point3, Rotation3, Translation3, UnitQuaternion, Vector3, Vector6,
@@ -132,7 +93,49 @@ struct Fit {
     converged: bool,
 }
 
-/// Solves the parent's pose from beacon pixels (see the module docs).
+/// Solves the parent's pose from beacon pixels.
+///
+/// # Method
+///
+/// Eq. (2) of the paper binds each beacon's pixel `P_i` to the parent's pose
+/// in the camera frame, `X_Bi^C = R_L^C B_i + X_L^C`, `P_i = π(X_Bi^C)` with
+/// `π` the pinhole projection. The pose minimises the sum of squared
+/// reprojection errors `Σ |π(R B_i + t) − P_i|²` (the maximum-likelihood
+/// estimate under Gaussian pixel noise), found numerically as the paper says:
+///
+/// 1. **Global starts.** (a) *Exhaustive P3P*: the three visible beacons that
+///    span the largest triangle in the image give, by Grunert's elimination,
+///    a quartic whose real roots are all the poses (up to four) that fit
+///    those three exactly (derivation on the private `p3p` function; roots by a bracketing solver that cannot
+///    lose a root to cancellation). (b) *POSIT* (scaled orthographic, then
+///    corrected for perspective) when four or more non-coplanar beacons are
+///    visible: P3P's quartic degenerates for a distant target (all bearings
+///    nearly parallel), which is where POSIT is best. (c) The previous
+///    estimate, refined first: while tracking, if its fit's cost is within
+///    the ambiguity margin (step 3) the global starts are skipped, since no
+///    other minimum could then change the choice. If nothing converges to an
+///    acceptable fit, P3P is repeated on the next-largest triangles (up to
+///    [`MAX_P3P_TRIPLES`]).
+/// 2. **Refinement — damped Newton (Levenberg–Marquardt form)** on the
+///    reprojection error of *every* visible beacon, from each start. The
+///    parameters are the translation and a rotation vector `ω` applied on
+///    the left, `R ← exp([ω]×) R`, about the centroid of the visible beacons
+///    (which decouples rotation from translation). The exact Hessian (not
+///    only Gauss–Newton's `JᵀJ`) keeps convergence quadratic in the flat,
+///    curved valleys of long-range fits, where Gauss–Newton crawls.
+/// 3. **Choice.** A converged fit is *acceptable* if it puts the camera
+///    inside every used beacon's emission cone (widened by
+///    `emission_margin_deg`): lights that shine aft cannot be seen from in
+///    front. Among acceptable fits the lowest cost wins, except that fits
+///    whose costs differ by less than `ambiguity_chi2 · σ²` cannot be told
+///    apart by the pixels: among those, the one nearest the previous
+///    estimate is taken. These two rules reject the mirrored / flipped
+///    solution. With exactly three beacons every P3P pose fits exactly, so
+///    without a previous estimate more than one candidate means invalid.
+///
+/// The covariance of `[position, rotation vector]` is `(JᵀJ)⁻¹ σ²` at the
+/// solution (Gauss–Newton approximation), `σ = max(camera.noise_px,
+/// pose.pixel_sigma_floor_px)`, rotated into the follower body frame.
 ///
 /// Holds the previous valid estimate (to reject flipped solutions and to
 /// warm-start) and fixed-size scratch; `estimate` does not allocate.
