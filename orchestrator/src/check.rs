@@ -59,6 +59,7 @@ pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
         .context(
         "formation: no displacement trajectories keep every pair apart and every parent in sight",
     )?;
+    let s_method_vertical = s.method.vertical_shift;
     let mut chosen = Vec::with_capacity(slots.len());
     for (slot, (d_a, d_b)) in slots.iter().zip(assigned) {
         let v = s
@@ -66,7 +67,11 @@ pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
             .iter_mut()
             .find(|v| v.name == slot.name)
             .context("follower vanished")?;
-        let d = (v.d_a_m.unwrap_or(d_a), v.d_b_m.unwrap_or(d_b));
+        let mut d = (v.d_a_m.unwrap_or(d_a), v.d_b_m.unwrap_or(d_b));
+        if !s_method_vertical {
+            // The ablation: no vertical displacement (eq. 5 with D_b = 0).
+            d.1 = 0.0;
+        }
         v.d_a_m = Some(d.0);
         v.d_b_m = Some(d.1);
         chosen.push(d);

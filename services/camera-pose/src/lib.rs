@@ -56,6 +56,7 @@ mod config;
 mod pnp;
 mod poly;
 
+pub mod acoustic;
 pub use camera::{BeaconObservation, BeaconStatus, Camera, Capsule};
 pub use config::{BeaconLayout, CameraConfig, CameraError, HullConfig, PoseConfig};
 pub use pnp::{follower_in_parent, parent_in_body, PoseEstimate, PoseEstimator, MAX_P3P_TRIPLES};

@@ -5,6 +5,9 @@
 //! the observation, exactly what goes out on `beacons`.
 
 use anyhow::Context;
+use nalgebra::Matrix6;
+
+use camera_pose::acoustic::{AcousticConfig, Modem};
 use camera_pose::{
     BeaconLayout, BeaconObservation, Camera, CameraConfig, Capsule, HullConfig, PoseConfig,
     PoseEstimator,
@@ -17,7 +20,16 @@ use shoal_runtime::ports::Origin;
 use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
 use shoal_scenario::Scenario;
 
+/// Where this follower's parent estimate comes from.
+enum Source {
+    /// The camera and PnP (the paper's method).
+    Camera,
+    /// The acoustic-modem baseline.
+    Acoustic(Modem),
+}
+
 pub struct CameraTask {
+    source: Source,
     camera: Camera,
     estimator: PoseEstimator,
     layout: BeaconLayout,
@@ -51,7 +63,17 @@ impl CameraTask {
         let hull: HullConfig = scenario.section("hull")?;
         let run = &rt.args().run_id;
         let lim = ChannelLimits::vehicle();
+        let source = match scenario.method.perception {
+            shoal_scenario::Perception::Camera => Source::Camera,
+            shoal_scenario::Perception::Acoustic => {
+                let cfg: AcousticConfig = scenario.section("acoustic")?;
+                // Stagger the parents' broadcasts so they do not all send at once.
+                let first = (parent as f64 * 0.37) % cfg.period_s();
+                Source::Acoustic(Modem::new(&cfg, first).map_err(anyhow::Error::msg)?)
+            }
+        };
         Ok(Self {
+            source,
             camera: Camera::new(&cam_cfg)?,
             estimator: PoseEstimator::new(&pose_cfg, &cam_cfg, &layout)?,
             layout,
@@ -94,6 +116,26 @@ impl Task for CameraTask {
         let Some(w) = self.world else {
             return Ok(());
         };
+        if let Source::Acoustic(modem) = &mut self.source {
+            let me = world_pose(&w.vehicles[self.index]);
+            let parent = world_pose(&w.vehicles[self.parent]);
+            let truth = me.inverse() * parent;
+            let now = shoal_runtime::mono_ns();
+            let packet = modem.step(ctx.sim_time_s(), now, &truth, &mut self.rng);
+            let cov = modem.covariance();
+            let (pose, origin) = match packet {
+                Some(p) => (
+                    pose_sample(true, 0, 0.0, 0, &p.parent_in_body, &cov),
+                    Origin {
+                        mono_ns: p.sent_mono_ns,
+                        sim_time_ns: (p.sent_s * 1e9).round() as u64,
+                    },
+                ),
+                None => (invalid_pose(0), Origin::here(ctx)),
+            };
+            self.pose_out.publish(pose, ctx, origin)?;
+            return Ok(());
+        }
         let obs = self.observe(&w);
         let origin = Origin::here(ctx);
         let mut b = Beacons::zeroed();
@@ -108,30 +150,62 @@ impl Task for CameraTask {
 
         // From here on only the observation is used.
         let est = self.estimator.estimate(&obs);
-        let mut p = LeaderPose::zeroed();
-        p.valid = u8::from(est.valid);
-        p.beacons_used = est.beacons_used as u8;
-        p.iterations = est.iterations;
-        p.reprojection_rms_px = est.reprojection_rms_px;
-        if est.valid {
-            p.parent_position_body_m = arr(&est.parent_in_body.translation.vector);
-            p.q_parent_to_body_wxyz = wxyz(&est.parent_in_body.rotation);
-            p.follower_in_parent_m = arr(&est.follower_in_parent_m);
-            for r in 0..6 {
-                for c in 0..6 {
-                    p.covariance[6 * r + c] = est.covariance[(r, c)];
-                }
-            }
+        let p = if est.valid {
+            pose_sample(
+                true,
+                est.beacons_used,
+                est.reprojection_rms_px,
+                est.iterations,
+                &est.parent_in_body,
+                &est.covariance,
+            )
         } else {
-            p.q_parent_to_body_wxyz = [1.0, 0.0, 0.0, 0.0];
-        }
-        if !p.is_finite() {
-            // Never publish a wild guess: a non-finite fit is an invalid one.
-            p = LeaderPose::zeroed();
-            p.q_parent_to_body_wxyz = [1.0, 0.0, 0.0, 0.0];
-            p.beacons_used = est.beacons_used as u8;
-        }
+            let mut p = invalid_pose(est.beacons_used);
+            p.iterations = est.iterations;
+            p.reprojection_rms_px = est.reprojection_rms_px;
+            p
+        };
+        // Never publish a wild guess: a non-finite fit is an invalid one.
+        let p = if p.is_finite() {
+            p
+        } else {
+            invalid_pose(est.beacons_used)
+        };
         self.pose_out.publish(p, ctx, origin)?;
         Ok(())
     }
+}
+
+/// A `leader_pose` sample for a fix.
+fn pose_sample(
+    valid: bool,
+    beacons_used: usize,
+    reprojection_rms_px: f64,
+    iterations: u32,
+    parent_in_body: &nalgebra::Isometry3<f64>,
+    covariance: &Matrix6<f64>,
+) -> LeaderPose {
+    let mut p = LeaderPose::zeroed();
+    p.valid = u8::from(valid);
+    p.beacons_used = beacons_used.min(255) as u8;
+    p.iterations = iterations;
+    p.reprojection_rms_px = reprojection_rms_px;
+    p.parent_position_body_m = arr(&parent_in_body.translation.vector);
+    p.q_parent_to_body_wxyz = wxyz(&parent_in_body.rotation);
+    let follower = camera_pose::follower_in_parent(parent_in_body);
+    p.follower_in_parent_m = arr(&follower);
+    for r in 0..6 {
+        for c in 0..6 {
+            p.covariance[6 * r + c] = covariance[(r, c)];
+        }
+    }
+    p
+}
+
+/// A `leader_pose` that says "no fix this frame".
+fn invalid_pose(beacons_used: usize) -> LeaderPose {
+    let mut p = LeaderPose::zeroed();
+    p.q_parent_to_body_wxyz = [1.0, 0.0, 0.0, 0.0];
+    p.beacons_used = beacons_used.min(255) as u8;
+    p
 }

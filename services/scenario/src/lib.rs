@@ -148,6 +148,39 @@ impl Default for Recording {
     }
 }
 
+/// How followers learn where their parent is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Perception {
+    /// The paper's method: the follower's camera sees the parent's beacons.
+    Camera,
+    /// The baseline the paper argues against: the parent's pose arrives over
+    /// a simulated acoustic modem (propagation delay, low bit rate, loss);
+    /// see the `[acoustic]` section.
+    Acoustic,
+}
+
+/// Variants of the method, for comparisons (`shoal compare`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Method {
+    /// Where a follower's knowledge of its parent comes from (default camera).
+    pub perception: Perception,
+    /// Shift followers vertically along eq. (5) while they avoid (default
+    /// true). `false` is the ablation D_b = 0: followers in line hide beacons
+    /// from the ones behind.
+    pub vertical_shift: bool,
+}
+
+impl Default for Method {
+    fn default() -> Self {
+        Self {
+            perception: Perception::Camera,
+            vertical_shift: true,
+        }
+    }
+}
+
 /// One vehicle.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -198,6 +231,9 @@ pub struct Scenario {
     /// Recording options.
     #[serde(default)]
     pub recording: Recording,
+    /// Method variant (camera or acoustic baseline, vertical shift on/off).
+    #[serde(default)]
+    pub method: Method,
     /// The vehicles; exactly one has no parent (the leader).
     pub vehicles: Vec<VehicleSpec>,
     /// Obstacles (`sonar::Obstacle` tables).
@@ -233,6 +269,9 @@ pub struct Scenario {
     /// Predictive controller (`mpc::MpcConfig`).
     #[serde(default)]
     pub mpc: toml::Table,
+    /// Acoustic modem of the baseline (`camera-pose`'s `AcousticConfig`).
+    #[serde(default)]
+    pub acoustic: toml::Table,
 }
 
 /// A process kind.
@@ -371,6 +410,7 @@ impl Scenario {
             "sonar" => &self.sonar,
             "follower" => &self.follower,
             "mpc" => &self.mpc,
+            "acoustic" => &self.acoustic,
             other => return Err(invalid(other, "no such section")),
         };
         toml::Value::Table(table.clone())
