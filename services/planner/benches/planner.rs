@@ -65,6 +65,7 @@ fn bench_steps(c: &mut Criterion) {
                 attitude: UnitQuaternion::identity(),
                 nu: Vector6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0),
                 position_ned_m: Vector3::new(t, 0.0, 10.0),
+                depth_m: 10.0,
                 sonar: Some(scan(true)),
             })
             .unwrap()

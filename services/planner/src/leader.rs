@@ -11,6 +11,17 @@
 //! `acceptance_radius_m` of it or its projection passes the leg's end. The wanted heading is
 //! line-of-sight: the leg's course plus `atan(−e/los_lookahead_m)` for a cross-track error `e`.
 //!
+//! The speed command also ramps up at most `accel_mps2` (from rest at the start, and after a
+//! stop), so the followers, who see the leader only through their cameras, are not left
+//! behind by a step in speed.
+//!
+//! # Navigation
+//! The leader steers on its own filtered position ([`crate::nav_filter`]): dead reckoning
+//! from the DVL and AHRS, corrected by the noisy absolute fixes (`position_fix_noise_m`),
+//! depth from the pressure sensor. The path's first vertex is the start as now best estimated
+//! (filtered position minus the dead-reckoned travel), refined while on the first leg, so a
+//! noisy first fix does not tilt the first leg.
+//!
 //! # Avoidance (our choice; the paper defers to its ref. [11])
 //! A **lateral offset of the track**. Sonar returns are remembered in NED (the leader has
 //! absolute navigation) until they are `memory_behind_m` behind it. Every step, the returns
@@ -32,6 +43,7 @@ use nalgebra::{UnitQuaternion, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
 use crate::frames::{to_level, wrap, yaw_of};
+use crate::nav_filter::PositionFilter;
 use crate::shift::beam_vector;
 use crate::types::{
     cfg_err, check_finite, check_nonneg, check_pos, Mode, PlannerError, PlannerOutput,
@@ -74,6 +86,14 @@ pub struct LeaderConfig {
     pub decel_mps2: f64,
     /// Transducer position in the body frame, m (default `[0.8, 0, 0]`).
     pub sonar_mount_body_m: [f64; 3],
+    /// Largest increase of the speed command, m/s² (default 0.1: 10 s from rest to 1 m/s).
+    pub accel_mps2: f64,
+    /// 1σ noise of the absolute position fix per axis, m (default 0.5, the `nav` default;
+    /// `shoal run` sets it from the scenario's `[nav] position_noise_m`).
+    pub position_fix_noise_m: f64,
+    /// Dead-reckoning velocity error assumed by the position filter, 1σ per step, m/s
+    /// (default 0.02: twice the DVL's noise).
+    pub dead_reckoning_noise_mps: f64,
 }
 
 impl Default for LeaderConfig {
@@ -93,6 +113,9 @@ impl Default for LeaderConfig {
             max_lead_m: 2.0,
             decel_mps2: 0.05,
             sonar_mount_body_m: [0.8, 0.0, 0.0],
+            accel_mps2: 0.1,
+            position_fix_noise_m: 0.5,
+            dead_reckoning_noise_mps: 0.02,
         }
     }
 }
@@ -126,6 +149,12 @@ impl LeaderConfig {
         check_pos("mission.los_lookahead_m", self.los_lookahead_m)?;
         check_pos("mission.max_lead_m", self.max_lead_m)?;
         check_pos("mission.decel_mps2", self.decel_mps2)?;
+        check_pos("mission.accel_mps2", self.accel_mps2)?;
+        check_pos("mission.position_fix_noise_m", self.position_fix_noise_m)?;
+        check_pos(
+            "mission.dead_reckoning_noise_mps",
+            self.dead_reckoning_noise_mps,
+        )?;
         for (i, v) in self.sonar_mount_body_m.iter().enumerate() {
             check_finite(&format!("mission.sonar_mount_body_m[{i}]"), *v)?;
         }
@@ -142,8 +171,11 @@ pub struct LeaderInput {
     pub attitude: UnitQuaternion<f64>,
     /// Body velocity `[u, v, w, p, q, r]`.
     pub nu: Vector6<f64>,
-    /// Absolute position, NED, m (the leader has absolute navigation).
+    /// Absolute position fix, NED, m (the leader has absolute navigation; noisy, filtered
+    /// here with the DVL).
     pub position_ned_m: Vector3<f64>,
+    /// Depth from the pressure sensor, m.
+    pub depth_m: f64,
     /// A new scan this step, if any.
     pub sonar: Option<SonarReturns>,
 }
@@ -172,6 +204,9 @@ pub struct LeaderPlanner {
     offset: f64,
     offset_goal: f64,
     done: Option<(Vector3<f64>, f64)>,
+    /// Speed command of the last step, m/s (ramped by `accel_mps2`).
+    v_cmd: f64,
+    nav: PositionFilter,
     memory: Vec<MemPoint>,
     /// Scratch: cross-track positions of the returns in the window.
     window: Vec<f64>,
@@ -194,6 +229,8 @@ impl LeaderPlanner {
             offset: 0.0,
             offset_goal: 0.0,
             done: None,
+            v_cmd: 0.0,
+            nav: PositionFilter::new(cfg.position_fix_noise_m, cfg.dead_reckoning_noise_mps),
             memory: Vec::with_capacity(LEADER_MEMORY_CAPACITY),
             window: Vec::with_capacity(LEADER_MEMORY_CAPACITY),
             cfg: cfg.clone(),
@@ -260,6 +297,19 @@ impl LeaderPlanner {
         self.started = true;
     }
 
+    /// Moves the first vertex to the start as now best estimated (horizontal only) and
+    /// recomputes the cumulative lengths.
+    fn reanchor_start(&mut self) {
+        let s = self.nav.start_estimate();
+        if let Some(p0) = self.path.first_mut() {
+            p0.x = s.x;
+            p0.y = s.y;
+        }
+        for i in 1..self.path.len() {
+            self.cum[i] = self.cum[i - 1] + (self.path[i] - self.path[i - 1]).norm();
+        }
+    }
+
     fn check_input(input: &LeaderInput) -> Result<(), PlannerError> {
         let ok = |what, b: bool| {
             if b {
@@ -283,6 +333,7 @@ impl LeaderPlanner {
             "position_ned_m",
             input.position_ned_m.iter().all(|x| x.is_finite()),
         )?;
+        ok("depth_m", input.depth_m.is_finite())?;
         Ok(())
     }
 
@@ -296,18 +347,23 @@ impl LeaderPlanner {
                 now_s: t,
             });
         }
-        let pos = input.position_ned_m;
         let first = !self.started;
-        if first {
-            self.start(&pos);
-        }
         let dt = if first {
             0.0
         } else {
             (t - self.t_prev).min(1.0)
         };
-        self.t_prev = t;
         let att = input.attitude;
+        let v_body = input.nu.fixed_rows::<3>(0).into_owned();
+        let pos = self
+            .nav
+            .step(dt, &att, &v_body, &input.position_ned_m, input.depth_m);
+        if first {
+            self.start(&pos);
+        } else if self.leg == 0 && self.done.is_none() {
+            self.reanchor_start();
+        }
+        self.t_prev = t;
         let yaw = yaw_of(&att);
         let c = self.cfg.d_min_m + self.cfg.avoid_margin_m;
         let last_wp = self
@@ -439,7 +495,9 @@ impl LeaderPlanner {
             self.cfg
                 .speed_mps
                 .min((2.0 * self.cfg.decel_mps2 * (total - self.rabbit).max(0.0)).sqrt())
+                .min(self.v_cmd + self.cfg.accel_mps2 * dt)
         };
+        self.v_cmd = v_cmd;
         self.rabbit = (self.rabbit + v_cmd * dt)
             .min(s_proj + self.cfg.max_lead_m)
             .max(s_proj)

@@ -54,6 +54,7 @@ pub mod follower;
 pub mod formation;
 pub mod frames;
 pub mod leader;
+pub mod nav_filter;
 pub mod observer;
 pub mod shift;
 mod types;

@@ -30,6 +30,13 @@ pub fn follower_config(scenario: &Scenario, name: &str) -> anyhow::Result<Follow
     Ok(cfg)
 }
 
+/// The one key of sim-plant's `[nav]` section the leader's position filter needs; absent →
+/// the mission's `position_fix_noise_m` (whose default is sim-plant's).
+#[derive(serde::Deserialize)]
+struct NavNoise {
+    position_noise_m: Option<f64>,
+}
+
 enum Role {
     Leader(LeaderPlanner),
     Follower {
@@ -56,6 +63,11 @@ impl PlannerTask {
         let role = if spec.parent.is_none() {
             let mut cfg: LeaderConfig = scenario.section("mission")?;
             cfg.d_min_m = scenario.safety.safe_distance_m;
+            // The position filter's fix noise is the nav sensor's (sim-plant's `[nav]`).
+            let nav: NavNoise = scenario.section("nav")?;
+            if let Some(n) = nav.position_noise_m.filter(|n| *n > 0.0) {
+                cfg.position_fix_noise_m = n;
+            }
             Role::Leader(LeaderPlanner::new(&cfg)?)
         } else {
             Role::Follower {
@@ -129,6 +141,7 @@ impl Task for PlannerTask {
                     attitude,
                     nu: nu_of(&nav),
                     position_ned_m: Vector3::from(nav.position_ned_m),
+                    depth_m: nav.depth_m,
                     sonar: sonar.as_ref().map(sonar_returns),
                 })
                 .map_err(TaskError::from_display)?

@@ -5,6 +5,7 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3, Vector6
 use planner::{LeaderConfig, LeaderInput, LeaderPlanner, Mode, PlannerOutput, SonarReturns};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use rand_distr::Distribution;
 use sonar::{Obstacle, ObstacleField, Sonar, SonarConfig};
 
 const DT: f64 = 0.1;
@@ -18,6 +19,8 @@ struct Leader {
     sonar: Sonar,
     field: ObstacleField,
     rng: ChaCha8Rng,
+    /// 1σ noise added to the absolute fix, m.
+    fix_noise_m: f64,
 }
 
 impl Leader {
@@ -31,6 +34,7 @@ impl Leader {
             sonar: Sonar::new(&SonarConfig::default()).unwrap(),
             field: ObstacleField::new(obstacles).unwrap(),
             rng: ChaCha8Rng::seed_from_u64(3),
+            fix_noise_m: 0.0,
         }
     }
 
@@ -48,13 +52,21 @@ impl Leader {
             count: s.count,
         };
         let nu_lin = att.inverse() * self.vel;
+        let noise = rand_distr::Normal::new(0.0, self.fix_noise_m.max(1e-12)).unwrap();
+        let fix = self.pos
+            + Vector3::new(
+                noise.sample(&mut self.rng),
+                noise.sample(&mut self.rng),
+                noise.sample(&mut self.rng),
+            );
         let out = self
             .planner
             .step(&LeaderInput {
                 t_s: self.t,
                 attitude: att,
                 nu: Vector6::new(nu_lin.x, nu_lin.y, nu_lin.z, 0.0, 0.0, 0.0),
-                position_ned_m: self.pos,
+                position_ned_m: fix,
+                depth_m: self.pos.z,
                 sonar: Some(sonar),
             })
             .unwrap();
@@ -234,4 +246,63 @@ fn mission_config_reads_from_toml() {
         .to_string()
         .contains("mission.speed_mps"));
     assert!(toml::from_str::<LeaderConfig>("speed = 1.0").is_err());
+}
+
+/// With the nav's default absolute-fix noise (0.5 m per axis at 10 Hz) the leader steers on
+/// its filtered position: heading commands stay smooth, it keeps its track and its speed
+/// (raw fixes made it zig-zag by ±6° and ratchet its virtual target forward to ~1.4 m/s).
+#[test]
+fn leader_filters_noisy_fixes() {
+    let cfg = LeaderConfig {
+        waypoints_ned_m: vec![[300.0, 0.0, 10.0]],
+        ..LeaderConfig::default()
+    };
+    let mut l = Leader::new(&cfg, &[]);
+    l.fix_noise_m = 0.5;
+    let mut x_at_20 = 0.0;
+    for k in 0..1200 {
+        let out = l.step();
+        if k >= 200 {
+            // after the ramp: heading command within ~1.5°, on the track within 0.3 m
+            assert!(
+                out.target.yaw_rel_rad.abs() < 0.025,
+                "yaw command {} at {}",
+                out.target.yaw_rel_rad,
+                l.t
+            );
+            assert!(l.pos.y.abs() < 0.3, "y {} at {}", l.pos.y, l.t);
+            assert!((l.pos.z - 10.0).abs() < 1e-9);
+        }
+        if k == 200 {
+            x_at_20 = l.pos.x;
+        }
+    }
+    let speed = (l.pos.x - x_at_20) / 100.0;
+    assert!((speed - cfg.speed_mps).abs() < 0.03, "mean speed {speed}");
+}
+
+/// The speed command ramps up at `accel_mps2` from rest.
+#[test]
+fn leader_ramps_its_speed_up() {
+    let cfg = LeaderConfig {
+        waypoints_ned_m: vec![[300.0, 0.0, 10.0]],
+        accel_mps2: 0.1,
+        ..LeaderConfig::default()
+    };
+    let mut l = Leader::new(&cfg, &[]);
+    let mut prev = 0.0;
+    for k in 0..200 {
+        let out = l.step();
+        let v = out.target.velocity_mps.norm();
+        assert!(
+            v <= prev + cfg.accel_mps2 * DT + 1e-9,
+            "step {k}: {prev} -> {v}"
+        );
+        assert!(v <= cfg.speed_mps + 1e-9);
+        prev = v;
+    }
+    assert!(
+        (prev - cfg.speed_mps).abs() < 1e-9,
+        "cruise speed reached: {prev}"
+    );
 }
