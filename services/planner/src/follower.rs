@@ -169,7 +169,9 @@ pub struct PoseMeasurement {
 /// One follower planner step's inputs: the vehicle's own sensors, plus what is new.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FollowerInput {
-    /// Simulation time, s.
+    /// Simulation time the own navigation below was measured at, s. Everything the step
+    /// returns refers to this instant (the process passes the nav sample's stamp, not its own
+    /// tick time, so that dead reckoning and the vision fixes' stamps agree).
     pub t_s: f64,
     /// Own attitude from the AHRS, body→NED. Its heading is used only differentially.
     pub attitude: UnitQuaternion<f64>,

@@ -165,7 +165,9 @@ impl LeaderConfig {
 /// One leader planner step's inputs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LeaderInput {
-    /// Simulation time, s.
+    /// Simulation time the own navigation below was measured at, s. Everything the step
+    /// returns refers to this instant (the process passes the nav sample's stamp, not its own
+    /// tick time, so that dead reckoning and the vision fixes' stamps agree).
     pub t_s: f64,
     /// Attitude, body→NED.
     pub attitude: UnitQuaternion<f64>,

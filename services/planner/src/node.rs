@@ -127,7 +127,12 @@ impl Task for PlannerTask {
         if let Some(s) = &sonar {
             origin = origin.earliest(Origin::of(&s.header));
         }
-        let t_s = ctx.sim_time_s();
+        // The planner's time base is the time of the nav sample, not this process's tick:
+        // the plant measured the state at the start of the frame and the planner runs three
+        // ticks later. Dead reckoning, the placing of vision fixes (stamped with their image
+        // time) and the target must all refer to the instant the state was measured, or the
+        // slot lags by speed × the difference (0.08 m at 1 m/s measured in the paper run).
+        let t_s = nav.header.sim_time_ns as f64 * 1e-9;
         let attitude = quat(nav.q_body_to_ned_wxyz);
         let out: PlannerOutput = match &mut self.role {
             Role::Leader(p) => {
