@@ -16,6 +16,9 @@ use crate::types::{
 pub const MEMORY_CAPACITY: usize = 128;
 /// Own-pose history kept to place late vision fixes.
 const HISTORY_CAPACITY: usize = 64;
+/// ParentLost: the follower turns toward the parent's last known position only if that is
+/// farther than this horizontally, m.
+const LOOK_MIN_RANGE_M: f64 = 1.0;
 
 /// Follower planner configuration (`[follower]` in a scenario; the slot and `d_a_m`/`d_b_m`
 /// are per vehicle).
@@ -231,6 +234,9 @@ struct Anchor {
     pos: Vector3<f64>,
     vel: Vector3<f64>,
     yaw: f64,
+    /// ParentLost: where the parent was last estimated to be (odometry frame); the follower
+    /// turns its nose (and camera) toward it.
+    look: Option<Vector3<f64>>,
 }
 
 /// The follower planner (paper sec. 3 and fig. 4).
@@ -249,7 +255,10 @@ struct Anchor {
 /// Lost parent: the estimate is *stale* `stale_after_s` after the last fused fix. Then
 /// **Coasting**: the target continues along the last prediction at the last target depth
 /// and heading, decelerating linearly to a stop over `coast_s` (it travels `v·coast_s/2`).
-/// Then **ParentLost**: hold that point, depth and heading. A vision fix during Coasting
+/// Then **ParentLost**: hold that point and depth, and turn toward the parent's last known
+/// position (the observer's estimate, predicted to the moment the parent was declared lost)
+/// so that the camera looks where the parent was; with no estimate at all (at start) the
+/// heading is held. A vision fix during Coasting
 /// resumes tracking at once; after ParentLost (and at start) the observer restarts and
 /// tracking resumes after `reacquire_count` consecutive fused fixes. `parent_age_s` and
 /// `parent_estimate_valid` always say how old the estimate is.
@@ -558,6 +567,7 @@ impl FollowerPlanner {
                             pos: p,
                             vel: Vector3::new(v.x, v.y, 0.0),
                             yaw: y,
+                            look: None,
                         };
                         self.slot.anchor = Some(a);
                         a
@@ -578,6 +588,11 @@ impl FollowerPlanner {
                 )
             }
             _ => {
+                // the parent's last estimate, predicted to now: where to look for it
+                let look = self
+                    .observer
+                    .initialized()
+                    .then(|| self.observer.position());
                 let anchor = match self.slot.anchor {
                     Some(a) if self.mode == Mode::ParentLost => a,
                     Some(a) if self.mode == Mode::Coasting => {
@@ -586,6 +601,7 @@ impl FollowerPlanner {
                             pos: a.pos + a.vel * (0.5 * self.cfg.coast_s),
                             vel: Vector3::zeros(),
                             yaw: a.yaw,
+                            look,
                         };
                         self.slot.anchor = Some(a);
                         a
@@ -600,12 +616,22 @@ impl FollowerPlanner {
                             pos,
                             vel: Vector3::zeros(),
                             yaw,
+                            look,
                         };
                         self.slot.anchor = Some(a);
                         a
                     }
                 };
-                (anchor.pos, Vector3::zeros(), anchor.yaw, Mode::ParentLost)
+                // Face the parent's last known position so that it comes back into the
+                // camera's view (a parent lost at the edge of the image, e.g. after a turn,
+                // would otherwise stay just outside it for good); keep the held heading if
+                // that position is too close to give a bearing.
+                let yaw = anchor
+                    .look
+                    .map(|l| l - self.odo)
+                    .filter(|d| d.xy().norm() > LOOK_MIN_RANGE_M)
+                    .map_or(anchor.yaw, |d| d.y.atan2(d.x));
+                (anchor.pos, Vector3::zeros(), yaw, Mode::ParentLost)
             }
         };
         self.mode = mode;

@@ -113,7 +113,8 @@ pub enum Mode {
     Avoiding = 1,
     /// Follower: parent estimate stale; following its prediction while slowing to a stop.
     Coasting = 2,
-    /// Follower: no usable parent estimate; holding position, depth and heading.
+    /// Follower: no usable parent estimate; holding position and depth, facing the parent's
+    /// last known position.
     ParentLost = 3,
     /// Leader: last waypoint reached; holding there.
     MissionDone = 4,

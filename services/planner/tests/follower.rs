@@ -456,3 +456,77 @@ fn a_repeated_fix_is_used_once() {
     assert!(!out.state.parent_estimate_valid);
     assert_eq!(out.state.mode, Mode::Coasting);
 }
+
+/// A parent lost near the edge of the image (here at ~40° bearing, stopped) is looked for:
+/// in `ParentLost` the follower turns its nose toward the parent's last known position, which
+/// brings it back to the middle of the image, and resumes tracking once fixes return.
+#[test]
+fn lost_parent_turns_toward_its_last_bearing_and_reacquires() {
+    let cfg = FollowerConfig::default();
+    let mut f = FollowerPlanner::new(&cfg).unwrap();
+    let parent = Vector3::new(6.0, 5.0, DEPTH); // NED, stopped
+    let me = Vector3::new(0.0, 0.0, DEPTH); // the follower holds here (not moved in this test)
+    let bearing = 5.0f64.atan2(6.0);
+    let mut yaw = 0.0f64;
+    let mut t = 0.0;
+    let fix_at = |t: f64, yaw: f64| PoseMeasurement {
+        t_s: t,
+        parent_in_body: pose(&me, yaw).inverse() * pose(&parent, 0.0),
+        covariance: Matrix6::identity() * 0.01,
+        valid: true,
+    };
+    let step = |f: &mut FollowerPlanner, t: f64, yaw: f64, fix: Option<PoseMeasurement>| {
+        f.step(&FollowerInput {
+            t_s: t,
+            attitude: UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+            nu: Vector6::zeros(),
+            depth_m: DEPTH,
+            pose: fix,
+            sonar: None,
+        })
+        .unwrap()
+    };
+    // seen for 3 s
+    for k in 0..30 {
+        let out = step(&mut f, t, yaw, Some(fix_at(t, yaw)));
+        t += DT;
+        // at start the parent counts as lost until reacquire_count fixes: the heading is
+        // held then (nothing known yet)
+        if k + 1 >= cfg.reacquire_count as usize {
+            assert_ne!(out.state.mode, Mode::ParentLost);
+        }
+    }
+    // then lost; while tracking/coasting the heading wanted is the parent's (0)
+    let mut turned = false;
+    for _ in 0..200 {
+        let out = step(&mut f, t, yaw, None);
+        t += DT;
+        if out.state.mode == Mode::ParentLost {
+            // the wanted heading is the bearing of the parent's last known position
+            assert_relative_eq!(yaw + out.target.yaw_rel_rad, bearing, epsilon = 0.02);
+            // the hold point does not move and the depth is kept
+            assert_eq!(out.target.velocity_mps, Vector3::zeros());
+            turned = true;
+        } else {
+            assert_relative_eq!(out.target.yaw_rel_rad, -yaw, epsilon = 1e-6);
+        }
+        // a heading controller that turns at most 3° per step
+        yaw += out.target.yaw_rel_rad.clamp(-0.05, 0.05);
+    }
+    assert!(turned);
+    // the parent is now straight ahead (it was at 40°, near the edge of a 90° image)
+    let rel = pose(&me, yaw).inverse() * pose(&parent, 0.0);
+    let seen_at = rel.translation.y.atan2(rel.translation.x);
+    assert!(
+        seen_at.abs() < 2f64.to_radians(),
+        "parent at {} deg",
+        seen_at.to_degrees()
+    );
+    // fixes return: tracking resumes after reacquire_count of them
+    let mut mode = Mode::ParentLost;
+    for _ in 0..cfg.reacquire_count {
+        mode = step(&mut f, t, yaw, Some(fix_at(t, yaw))).state.mode;
+        t += DT;
+    }
+    assert_ne!(mode, Mode::ParentLost);
+}
