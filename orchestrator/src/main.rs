@@ -3,6 +3,7 @@
 //! recordings. See `shoal --help`.
 
 mod check;
+mod plots;
 mod run;
 mod summary;
 mod supervisor;
