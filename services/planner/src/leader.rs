@@ -389,10 +389,13 @@ impl LeaderPlanner {
         self.memory
             .retain(|m| to_level(yaw, &(m.pos - pos)).x >= -behind && t - m.t <= max_age);
 
-        // mission done (sticky)
+        // mission done (sticky): near the last waypoint, and the virtual target has reached
+        // it, so the speed command has tapered to zero — switching to the hold earlier cut
+        // the feed-forward from ~0.45 m/s to 0 in one step and the followers overshot
+        let rabbit_at_end = self.rabbit >= self.total() - 1e-9;
         if self.done.is_none()
             && (pos - last_wp).norm() <= self.cfg.acceptance_radius_m
-            && (self.path.len() < 2 || self.leg + 2 >= self.path.len())
+            && (self.path.len() < 2 || (self.leg + 2 >= self.path.len() && rabbit_at_end))
         {
             self.done = Some((last_wp, yaw));
         }

@@ -92,6 +92,7 @@ fn leader_reaches_its_waypoints() {
     let mut l = Leader::new(&cfg, &[]);
     let mut seen = [false; 3];
     let mut done_at = None;
+    let mut prev_cmd = f64::INFINITY;
     for _ in 0..2000 {
         let out = l.step();
         seen[out.state.waypoint_index] = true;
@@ -99,9 +100,17 @@ fn leader_reaches_its_waypoints() {
         let bound = cfg.speed_mps + cfg.max_lead_m * 1.0 + 1e-6;
         assert!(l.vel.norm() <= bound, "speed {}", l.vel.norm());
         if out.state.mode == Mode::MissionDone {
+            if done_at.is_none() {
+                // the speed had tapered to (nearly) zero before the hold: no step in speed
+                assert!(
+                    prev_cmd < 0.05,
+                    "speed command {prev_cmd} m/s just before the hold"
+                );
+            }
             done_at.get_or_insert(l.t);
             assert_eq!(out.target.velocity_mps, Vector3::zeros());
         }
+        prev_cmd = out.target.velocity_mps.norm();
     }
     assert_eq!(seen, [true; 3]);
     let done_at = done_at.expect("mission not done");
