@@ -76,8 +76,16 @@ pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
         v.d_b_m = Some(d.1);
         chosen.push(d);
     }
-    planner::formation::check(&leader, &slots, &chosen, d_min, &params).context(
-        "formation: the given D_a/D_b do not keep every pair apart and every parent in sight",
-    )?;
+    // The ablation (no vertical shift) is by design a formation the check
+    // refuses: it is run to measure what that costs.
+    if s_method_vertical {
+        planner::formation::check(&leader, &slots, &chosen, d_min, &params).context(
+            "formation: the given D_a/D_b do not keep every pair apart and every parent in sight",
+        )?;
+    }
+    if s.method.perception == shoal_scenario::Perception::Acoustic {
+        let acoustic: camera_pose::acoustic::AcousticConfig = s.section("acoustic")?;
+        acoustic.validate().map_err(anyhow::Error::msg)?;
+    }
     Ok(())
 }

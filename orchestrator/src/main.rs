@@ -3,6 +3,7 @@
 //! recordings. See `shoal --help`.
 
 mod check;
+mod compare;
 mod plots;
 mod run;
 mod summary;
@@ -36,6 +37,9 @@ enum Cmd {
         /// Scenario TOML (default: the embedded paper scenario).
         scenario: Option<PathBuf>,
     },
+    /// Run the method, the acoustic-modem baseline and the no-vertical-shift
+    /// ablation side by side; write DIR/compare.md and DIR/compare.json.
+    Compare(CompareCmd),
     /// List a recording's channels, schemas, counts, rates, time span, gaps.
     Inspect {
         /// The MCAP file.
@@ -74,6 +78,24 @@ struct RunCmd {
     quiet: bool,
 }
 
+#[derive(Debug, clap::Args)]
+struct CompareCmd {
+    /// Scenario TOML (default: the embedded paper scenario).
+    scenario: Option<PathBuf>,
+    /// Output directory (default: runs/compare-<scenario>-<unix time>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Seed (overrides the scenario's).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Directory holding the service binaries (default: next to `shoal`).
+    #[arg(long)]
+    bin_dir: Option<PathBuf>,
+    /// No progress bars.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
 fn load_scenario(path: &Option<PathBuf>) -> anyhow::Result<Scenario> {
     match path {
         Some(p) => {
@@ -81,6 +103,68 @@ fn load_scenario(path: &Option<PathBuf>) -> anyhow::Result<Scenario> {
         }
         None => Scenario::paper().context("the embedded paper scenario is invalid"),
     }
+}
+
+/// Everything one run needs besides its scenario.
+struct RunSettings {
+    mode: Mode,
+    bin_dir: PathBuf,
+    progress: bool,
+    tick_timeout: Duration,
+}
+
+impl RunSettings {
+    fn new(
+        mode: Mode,
+        bin_dir: Option<PathBuf>,
+        quiet: bool,
+        tick_timeout: f64,
+    ) -> anyhow::Result<Self> {
+        let bin_dir = match bin_dir {
+            Some(d) => d,
+            None => std::env::current_exe()?
+                .parent()
+                .map(PathBuf::from)
+                .context("cannot locate the service binaries")?,
+        };
+        Ok(Self {
+            mode,
+            bin_dir,
+            progress: !quiet,
+            tick_timeout: Duration::from_secs_f64(tick_timeout.max(0.1)),
+        })
+    }
+}
+
+/// Resolves, runs and summarises one scenario into `out`; returns the summary.
+fn run_and_summarize(
+    mut scenario: Scenario,
+    out: &std::path::Path,
+    settings: &RunSettings,
+) -> anyhow::Result<serde_json::Value> {
+    check::resolve(&mut scenario).context("scenario refused")?;
+    if out.join("recording.mcap").exists() {
+        anyhow::bail!(
+            "{} already holds a recording; choose another --out (nothing was overwritten)",
+            out.display()
+        );
+    }
+    let opts = run::RunOptions {
+        scenario: scenario.clone(),
+        out: out.to_path_buf(),
+        mode: settings.mode,
+        bin_dir: settings.bin_dir.clone(),
+        progress: settings.progress,
+        tick_timeout: settings.tick_timeout,
+    };
+    let outcome = run::run(&opts)?;
+    let rec = recordings::Recording::open(&outcome.recording)?;
+    let summary = summary::summarize(&scenario, &rec, &outcome, settings.mode.as_str());
+    let path = out.join("summary.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    plots::write_plots(&scenario, &rec, &out.join("plots")).context("writing the plots")?;
+    Ok(summary)
 }
 
 fn cmd_run(cmd: RunCmd) -> anyhow::Result<()> {
@@ -91,35 +175,12 @@ fn cmd_run(cmd: RunCmd) -> anyhow::Result<()> {
     if let Some(d) = cmd.duration {
         scenario.duration_s = d;
     }
-    check::resolve(&mut scenario).context("scenario refused")?;
-    let bin_dir = match cmd.bin_dir {
-        Some(d) => d,
-        None => std::env::current_exe()?
-            .parent()
-            .map(PathBuf::from)
-            .context("cannot locate the service binaries")?,
-    };
-    let out = cmd.out.unwrap_or_else(|| run::default_out(&scenario));
-    if out.join("recording.mcap").exists() {
-        anyhow::bail!(
-            "{} already holds a recording; choose another --out (nothing was overwritten)",
-            out.display()
-        );
-    }
-    let opts = run::RunOptions {
-        scenario: scenario.clone(),
-        out: out.clone(),
-        mode: cmd.mode,
-        bin_dir,
-        progress: !cmd.quiet,
-        tick_timeout: Duration::from_secs_f64(cmd.tick_timeout.max(0.1)),
-    };
-    let outcome = run::run(&opts)?;
-    let rec = recordings::Recording::open(&outcome.recording)?;
-    let summary = summary::summarize(&scenario, &rec, &outcome, cmd.mode.as_str());
-    let path = out.join("summary.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
-        .with_context(|| format!("cannot write {}", path.display()))?;
+    let out = cmd
+        .out
+        .clone()
+        .unwrap_or_else(|| run::default_out(&scenario));
+    let settings = RunSettings::new(cmd.mode, cmd.bin_dir, cmd.quiet, cmd.tick_timeout)?;
+    let summary = run_and_summarize(scenario, &out, &settings)?;
     if !cmd.quiet {
         print_table(&summary);
     }
@@ -235,6 +296,7 @@ fn main() -> ExitCode {
             Ok(())
         }),
         Cmd::Inspect { recording, json } => cmd_inspect(recording, json),
+        Cmd::Compare(cmd) => compare::cmd_compare(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

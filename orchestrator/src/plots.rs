@@ -98,7 +98,6 @@ impl Fig {
 
 /// Writes the figures of a run into `dir` (created if missing) as PNG and SVG; returns the files written.
 // Called by main.rs after a run; the allow keeps the module warning-free until then.
-#[allow(dead_code)]
 pub fn write_plots(
     scenario: &Scenario,
     rec: &Recording,

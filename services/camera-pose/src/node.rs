@@ -131,13 +131,13 @@ impl Task for CameraTask {
                         sim_time_ns: (p.sent_s * 1e9).round() as u64,
                     },
                 ),
-                None => (invalid_pose(0), Origin::here(ctx)),
+                None => (invalid_pose(0), Origin::of(&w.header)),
             };
             self.pose_out.publish(pose, ctx, origin)?;
             return Ok(());
         }
         let obs = self.observe(&w);
-        let origin = Origin::here(ctx);
+        let origin = Origin::of(&w.header);
         let mut b = Beacons::zeroed();
         for i in 0..obs.count.min(ipc_types::MAX_BEACONS) {
             b.pixels_uv[2 * i] = obs.pixels[i][0];

@@ -77,7 +77,8 @@ impl Task for SonarTask {
             *d = u8::from(v);
         }
         s.count = scan.count as u32;
-        self.out.publish(s, ctx, Origin::here(ctx))?;
+        let origin = Origin::of(&w.header);
+        self.out.publish(s, ctx, origin)?;
         Ok(())
     }
 }
