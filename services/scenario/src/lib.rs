@@ -200,7 +200,9 @@ pub struct VehicleSpec {
     /// Start heading, deg (default: the parent's).
     #[serde(default)]
     pub start_yaw_deg: Option<f64>,
-    /// Displacement length D_a of eq. (4), m (default: computed from the formation).
+    /// Displacement D_a of eq. (4), m (default: computed from the formation).
+    /// The paper's side sign is applied by the planner (a port slot shifts
+    /// forward, a starboard one back); a negative value reverses that.
     #[serde(default)]
     pub d_a_m: Option<f64>,
     /// Vertical displacement D_b of eq. (5), m, signed (+ = down) (default: computed).
@@ -613,11 +615,8 @@ impl Scenario {
                 }
             }
             if let Some(d) = v.d_a_m {
-                if !(d.is_finite() && d >= 0.0) {
-                    return Err(invalid(
-                        format!("vehicles[{i}].d_a_m"),
-                        format!("must be >= 0, got {d}"),
-                    ));
+                if !d.is_finite() {
+                    return Err(invalid(format!("vehicles[{i}].d_a_m"), "must be finite"));
                 }
             }
             if let Some(d) = v.d_b_m {
