@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
-use iceoryx2::port::listener::Listener;
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
@@ -403,7 +403,13 @@ fn wait_done(
                 },
                 slice,
             )
-            .map_err(|e| anyhow::anyhow!("waiting for done: {e:?}"))?;
+            .map_err(|e| match e {
+                // A signal that lands inside the blocking wait ends it early.
+                ListenerWaitError::InterruptSignal => anyhow::Error::from(RunError::Interrupted(
+                    termination_requested().unwrap_or("SIGINT"),
+                )),
+                other => anyhow::anyhow!("waiting for done: {other:?}"),
+            })?;
         if remaining == 0 {
             break;
         }
