@@ -2,9 +2,13 @@
 //! processes over iceoryx2, records every channel to MCAP, and inspects the
 //! recordings. See `shoal --help`.
 
+mod bench_ipc;
 mod check;
 mod compare;
+mod export;
+mod gen;
 mod plots;
+mod recover;
 mod run;
 mod summary;
 mod supervisor;
@@ -48,6 +52,21 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// Generate a large-group scenario on stdout.
+    Gen(gen::GenCmd),
+    /// Convert a recording for other viewers (Foxglove).
+    Export(export::ExportCmd),
+    /// Write a complete, indexed copy of a truncated recording.
+    Recover(recover::RecoverCmd),
+    /// Benchmarks that print figures.
+    #[command(subcommand)]
+    Bench(BenchCmd),
+}
+
+#[derive(Debug, Subcommand)]
+enum BenchCmd {
+    /// Ping-pong latency: raw iceoryx2, shoal's runtime, Unix-domain sockets.
+    Ipc(bench_ipc::IpcCmd),
 }
 
 #[derive(Debug, clap::Args)]
@@ -297,6 +316,10 @@ fn main() -> ExitCode {
         }),
         Cmd::Inspect { recording, json } => cmd_inspect(recording, json),
         Cmd::Compare(cmd) => compare::cmd_compare(cmd),
+        Cmd::Gen(cmd) => gen::run(cmd),
+        Cmd::Export(cmd) => export::run(cmd),
+        Cmd::Recover(cmd) => recover::run(cmd),
+        Cmd::Bench(BenchCmd::Ipc(cmd)) => bench_ipc::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
