@@ -132,6 +132,8 @@ macro_rules! sample {
     };
 }
 
+pub mod bench;
+
 described! {
     /// The header every sample starts with.
     ///
