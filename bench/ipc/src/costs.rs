@@ -1,0 +1,179 @@
+//! Where a shoal hop's time goes: each per-sample step of shoal's ports
+//! timed alone, and one publish → take hop through raw iceoryx2 and through
+//! shoal's ports in one process (no scheduler, no wake-up in the figure).
+//!
+//! Every figure is the fastest of [`REPEATS`] batches, in ns per call, so a
+//! preempted batch does not count.
+
+use std::hint::black_box;
+use std::time::Instant;
+
+use iceoryx2::prelude::*;
+use ipc_types::bench::{bench_service_name, BenchDirection, BenchPing256, BenchPing4K};
+use ipc_types::Sample;
+use shoal_runtime::ports::Origin;
+use shoal_runtime::{ChannelLimits, LatencyRecorder, Mode, StepContext};
+
+use crate::payload::{Payload, Raw256, Raw4K};
+use crate::{dbg, raw_config, BenchError, PeerConfig};
+
+/// Batches per figure; the fastest counts.
+const REPEATS: usize = 7;
+
+/// Per-call costs of shoal's per-sample steps for one sample size, ns.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CostReport {
+    /// Sample size, bytes.
+    pub size: usize,
+    /// `Sample::is_finite` (run once on publish and once on take).
+    pub is_finite_ns: f64,
+    /// Building the field description (`Described::fields`) that
+    /// `is_finite` walks; included in `is_finite_ns`.
+    pub fields_ns: f64,
+    /// `shoal_runtime::mono_ns` (header stamp on publish, latency on take).
+    pub mono_ns_ns: f64,
+    /// `LatencyRecorder::record_ns` (on take).
+    pub record_ns: f64,
+    /// One copy of the sample by value.
+    pub copy_ns: f64,
+    /// Raw iceoryx2 loan + write + send, then receive + copy out, one process.
+    pub hop_raw_ns: f64,
+    /// shoal `Publisher::publish`, then `Subscriber::take_ready`, one process.
+    pub hop_shoal_ns: f64,
+}
+
+fn best_of(batch: usize, mut f: impl FnMut()) -> f64 {
+    let mut best = f64::INFINITY;
+    for _ in 0..REPEATS {
+        let t0 = Instant::now();
+        for _ in 0..batch {
+            f();
+        }
+        best = best.min(t0.elapsed().as_nanos() as f64 / batch as f64);
+    }
+    best
+}
+
+/// Measures the costs for `cfg.size` in the domain `cfg.run_id`.
+pub fn measure(cfg: &PeerConfig) -> Result<CostReport, BenchError> {
+    match cfg.size {
+        256 => measure_typed::<BenchPing256, Raw256>(cfg),
+        4096 => measure_typed::<BenchPing4K, Raw4K>(cfg),
+        s => Err(BenchError::UnsupportedSize(s)),
+    }
+}
+
+fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
+    cfg: &PeerConfig,
+) -> Result<CostReport, BenchError> {
+    let sample = S::make(3);
+    let small = 20_000;
+    let finite_batch = if S::SIZE > 1024 { 500 } else { 5_000 };
+    let is_finite_ns = best_of(finite_batch, || {
+        black_box(black_box(&sample).is_finite());
+    });
+    let fields_ns = best_of(finite_batch, || {
+        black_box(S::fields());
+    });
+    let mono_ns_ns = best_of(small, || {
+        black_box(shoal_runtime::mono_ns());
+    });
+    let mut rec = LatencyRecorder::new();
+    let mut v = 1_000u64;
+    let record_ns = best_of(small, || {
+        v = v.wrapping_mul(6364136223846793005).wrapping_add(1) % 100_000 + 1;
+        rec.record_ns(black_box(v));
+    });
+    let copy_ns = best_of(small, || {
+        let c: S = *black_box(&sample);
+        black_box(c);
+    });
+    let hops = 5_000;
+
+    // Raw iceoryx2, one process.
+    let node = NodeBuilder::new()
+        .config(&raw_config(&cfg.run_id))
+        .create::<ipc::Service>()
+        .map_err(|e| BenchError::setup("the costs node")(dbg(e)))?;
+    let name = bench_service_name(&cfg.run_id, "costs-raw", cfg.size, BenchDirection::Ping);
+    let service = node
+        .service_builder(
+            &ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(dbg(e)))?,
+        )
+        .publish_subscribe::<R>()
+        .open_or_create()
+        .map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+    let tx = service
+        .publisher_builder()
+        .create()
+        .map_err(|e| BenchError::setup("a raw publisher")(dbg(e)))?;
+    let rx = service
+        .subscriber_builder()
+        .create()
+        .map_err(|e| BenchError::setup("a raw subscriber")(dbg(e)))?;
+    let raw = R::make(3);
+    let mut failure: Option<BenchError> = None;
+    let hop_raw_ns = best_of(hops, || {
+        let step = || -> Result<(), String> {
+            tx.loan_uninit()
+                .map_err(dbg)?
+                .write_payload(*black_box(&raw))
+                .send()
+                .map_err(dbg)?;
+            if let Some(s) = rx.receive().map_err(dbg)? {
+                let v: R = *s;
+                black_box(v);
+            }
+            Ok(())
+        };
+        if let Err(reason) = step() {
+            failure = Some(BenchError::Io {
+                what: "raw hop",
+                reason,
+            });
+        }
+    });
+    if let Some(e) = failure {
+        return Err(e);
+    }
+
+    // shoal's ports, one process.
+    let snode = shoal_runtime::domain_node(&cfg.run_id, "bench/costs")?;
+    let sname = bench_service_name(&cfg.run_id, "costs-shoal", cfg.size, BenchDirection::Ping);
+    let limits = ChannelLimits::vehicle();
+    let mut stx = shoal_runtime::node_publisher::<S>(&snode, &sname, &limits)?;
+    let mut srx = shoal_runtime::node_subscriber::<S>(&snode, &sname, &limits, 2)?;
+    let ctx = StepContext {
+        sim_time_ns: 0,
+        tick: 0,
+        wake_mono_ns: 0,
+        since_last_ns: 0,
+        last: false,
+        mode: Mode::Realtime,
+    };
+    let mut sfailure: Option<BenchError> = None;
+    let hop_shoal_ns = best_of(hops, || {
+        let mut step = || -> Result<(), shoal_runtime::RuntimeError> {
+            stx.publish(*black_box(&sample), &ctx, Origin::of(sample.header()))?;
+            srx.take_ready(&ctx, |v| {
+                black_box(v);
+            })
+        };
+        if let Err(e) = step() {
+            sfailure = Some(e.into());
+        }
+    });
+    if let Some(e) = sfailure {
+        return Err(e);
+    }
+    Ok(CostReport {
+        size: S::SIZE,
+        is_finite_ns,
+        fields_ns,
+        mono_ns_ns,
+        record_ns,
+        copy_ns,
+        hop_raw_ns,
+        hop_shoal_ns,
+    })
+}

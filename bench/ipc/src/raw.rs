@@ -1,0 +1,324 @@
+//! The raw iceoryx2 cases: only iceoryx2's own API on the path, with its
+//! default service settings, the way its examples and benchmarks use it.
+
+use std::time::Duration;
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use ipc_types::bench::{bench_event_name, bench_service_name, BenchDirection};
+
+use crate::driver::{run_pinger, run_ponger, Served};
+use crate::payload::Payload;
+use crate::wait::Backoff;
+use crate::{dbg, raw_config, BenchError, Case, PeerConfig, PeerReport};
+
+/// The ports of one raw peer.
+struct Ports<M: Payload + ZeroCopySend> {
+    // The node must outlive its ports; kept here for that.
+    _node: Node<ipc::Service>,
+    tx: Publisher<ipc::Service, M, ()>,
+    rx: Subscriber<ipc::Service, M, ()>,
+    /// Event ports of the blocking cases: wakes the peer / is woken.
+    events: Option<(Notifier<ipc::Service>, Listener<ipc::Service>)>,
+}
+
+fn open<M: Payload + ZeroCopySend>(cfg: &PeerConfig, ping: bool) -> Result<Ports<M>, BenchError> {
+    let config = raw_config(&cfg.run_id);
+    let node = NodeBuilder::new()
+        .config(&config)
+        .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+        .create::<ipc::Service>()
+        .map_err(|e| BenchError::setup("the raw iceoryx2 node")(dbg(e)))?;
+    let (out_dir, in_dir) = if ping {
+        (BenchDirection::Ping, BenchDirection::Pong)
+    } else {
+        (BenchDirection::Pong, BenchDirection::Ping)
+    };
+    let case = cfg.case.name();
+    let pubsub = |dir| {
+        let name = bench_service_name(&cfg.run_id, case, cfg.size, dir);
+        let service_name =
+            ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+        node.service_builder(&service_name)
+            .publish_subscribe::<M>()
+            .open_or_create()
+            .map_err(|e| BenchError::setup(name)(dbg(e)))
+    };
+    let tx = pubsub(out_dir)?
+        .publisher_builder()
+        .create()
+        .map_err(|e| BenchError::setup("a raw publisher")(dbg(e)))?;
+    let rx = pubsub(in_dir)?
+        .subscriber_builder()
+        .create()
+        .map_err(|e| BenchError::setup("a raw subscriber")(dbg(e)))?;
+    let events = if cfg.case == Case::IoxPoll {
+        None
+    } else {
+        let event = |dir| {
+            let name = bench_event_name(&cfg.run_id, case, cfg.size, dir);
+            let service_name =
+                ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+            node.service_builder(&service_name)
+                .event()
+                .open_or_create()
+                .map_err(|e| BenchError::setup(name)(dbg(e)))
+        };
+        let notifier = event(out_dir)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| BenchError::setup("a raw notifier")(dbg(e)))?;
+        let listener = event(in_dir)?
+            .listener_builder()
+            .create()
+            .map_err(|e| BenchError::setup("a raw listener")(dbg(e)))?;
+        Some((notifier, listener))
+    };
+    Ok(Ports {
+        _node: node,
+        tx,
+        rx,
+        events,
+    })
+}
+
+fn send<M: Payload + ZeroCopySend>(
+    tx: &Publisher<ipc::Service, M, ()>,
+    m: &M,
+) -> Result<(), BenchError> {
+    let sample = tx.loan_uninit().map_err(|e| BenchError::Io {
+        what: "loan",
+        reason: dbg(e),
+    })?;
+    sample
+        .write_payload(*m)
+        .send()
+        .map(|_| ())
+        .map_err(|e| BenchError::Io {
+            what: "send",
+            reason: dbg(e),
+        })
+}
+
+fn notify(n: &Notifier<ipc::Service>) -> Result<(), BenchError> {
+    n.notify().map(|_| ()).map_err(|e| BenchError::Io {
+        what: "notify",
+        reason: dbg(e),
+    })
+}
+
+/// Takes every waiting sample; returns the one of `round`, if any.
+fn take_round<M: Payload + ZeroCopySend>(
+    rx: &Subscriber<ipc::Service, M, ()>,
+    round: u64,
+) -> Result<Option<M>, BenchError> {
+    let mut found = None;
+    while let Some(s) = rx.receive().map_err(|e| BenchError::Io {
+        what: "receive",
+        reason: dbg(e),
+    })? {
+        if s.round() == round {
+            found = Some(*s);
+        }
+    }
+    Ok(found)
+}
+
+/// Echoes every waiting sample, copying it from the received sample straight
+/// into a loaned one.
+fn echo_all<M: Payload + ZeroCopySend>(
+    rx: &Subscriber<ipc::Service, M, ()>,
+    tx: &Publisher<ipc::Service, M, ()>,
+) -> Result<Served, BenchError> {
+    let mut served = Served::default();
+    while let Some(s) = rx.receive().map_err(|e| BenchError::Io {
+        what: "receive",
+        reason: dbg(e),
+    })? {
+        let round = s.round();
+        send(tx, &s)?;
+        served.add(round);
+    }
+    Ok(served)
+}
+
+fn wait_error(e: impl std::fmt::Debug) -> BenchError {
+    BenchError::Io {
+        what: "waiting",
+        reason: dbg(e),
+    }
+}
+
+fn check_run(r: WaitSetRunResult) -> Result<(), BenchError> {
+    match r {
+        WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => {
+            Err(BenchError::Interrupted)
+        }
+        _ => Ok(()),
+    }
+}
+
+/// The pinger of a raw case.
+pub(crate) fn ping<M: Payload + ZeroCopySend>(cfg: &PeerConfig) -> Result<PeerReport, BenchError> {
+    let ports = open::<M>(cfg, true)?;
+    let Ports { tx, rx, events, .. } = &ports;
+    let timeout = cfg.timeout();
+    match (cfg.case, events) {
+        (Case::IoxEvent, Some((notifier, listener))) => run_pinger(
+            cfg,
+            |m| {
+                send(tx, m)?;
+                notify(notifier)
+            },
+            |round, limit| loop {
+                match limit {
+                    None => listener.blocking_wait(|_| {}),
+                    Some(t) => listener.timed_wait(|_| {}, t),
+                }
+                .map_err(wait_error)?;
+                if let Some(m) = take_round(rx, round)? {
+                    return Ok(Some(m));
+                }
+                if limit.is_some() {
+                    return Ok(None);
+                }
+            },
+        ),
+        (Case::IoxWaitset, Some((notifier, listener))) => {
+            let waitset = WaitSetBuilder::new()
+                .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+                .create::<ipc::Service>()
+                .map_err(|e| BenchError::setup("a wait set")(dbg(e)))?;
+            let guard = waitset
+                .attach_notification(listener)
+                .map_err(|e| BenchError::setup("a wait set attachment")(dbg(e)))?;
+            run_pinger(
+                cfg,
+                |m| {
+                    send(tx, m)?;
+                    notify(notifier)
+                },
+                |round, limit| loop {
+                    let mut found = None;
+                    let mut failure = None;
+                    let on_event = |id: WaitSetAttachmentId<ipc::Service>| {
+                        if id.has_event_from(&guard) {
+                            let _ = listener.try_wait(|_| {});
+                            match take_round(rx, round) {
+                                Ok(m) => found = found.or(m),
+                                Err(e) => failure = Some(e),
+                            }
+                        }
+                        CallbackProgression::Continue
+                    };
+                    let r = waitset
+                        .wait_and_process_once_with_timeout(
+                            on_event,
+                            limit.unwrap_or(Duration::MAX),
+                        )
+                        .map_err(wait_error)?;
+                    check_run(r)?;
+                    if let Some(e) = failure {
+                        return Err(e);
+                    }
+                    if found.is_some() || limit.is_some() {
+                        return Ok(found);
+                    }
+                },
+            )
+        }
+        _ => run_pinger(
+            cfg,
+            |m| send(tx, m),
+            |round, limit| {
+                let mut backoff = Backoff::new(limit.unwrap_or(timeout), "a polled reply");
+                loop {
+                    if let Some(m) = take_round(rx, round)? {
+                        return Ok(Some(m));
+                    }
+                    if let Err(e) = backoff.snooze() {
+                        return match (e, limit) {
+                            (BenchError::Timeout { .. }, Some(_)) => Ok(None),
+                            (e, _) => Err(e),
+                        };
+                    }
+                }
+            },
+        ),
+    }
+}
+
+/// The ponger of a raw case.
+pub(crate) fn pong<M: Payload + ZeroCopySend>(cfg: &PeerConfig) -> Result<u64, BenchError> {
+    let ports = open::<M>(cfg, false)?;
+    let Ports { tx, rx, events, .. } = &ports;
+    match (cfg.case, events) {
+        (Case::IoxEvent, Some((notifier, listener))) => run_ponger(|| {
+            listener.blocking_wait(|_| {}).map_err(wait_error)?;
+            let served = echo_all(rx, tx)?;
+            if served.echoed > 0 {
+                notify(notifier)?;
+            }
+            Ok(served)
+        }),
+        (Case::IoxWaitset, Some((notifier, listener))) => {
+            let waitset = WaitSetBuilder::new()
+                .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+                .create::<ipc::Service>()
+                .map_err(|e| BenchError::setup("a wait set")(dbg(e)))?;
+            let guard = waitset
+                .attach_notification(listener)
+                .map_err(|e| BenchError::setup("a wait set attachment")(dbg(e)))?;
+            run_ponger(|| {
+                let mut served = Served::default();
+                let mut failure = None;
+                let on_event = |id: WaitSetAttachmentId<ipc::Service>| {
+                    if id.has_event_from(&guard) {
+                        let _ = listener.try_wait(|_| {});
+                        match echo_all(rx, tx).and_then(|s| {
+                            if s.echoed > 0 {
+                                notify(notifier)?;
+                            }
+                            Ok(s)
+                        }) {
+                            Ok(s) => {
+                                served.echoed += s.echoed;
+                                served.stop |= s.stop;
+                            }
+                            Err(e) => {
+                                failure = Some(e);
+                                return CallbackProgression::Stop;
+                            }
+                        }
+                    }
+                    CallbackProgression::Continue
+                };
+                let r = waitset
+                    .wait_and_process_once(on_event)
+                    .map_err(wait_error)?;
+                check_run(r)?;
+                match failure {
+                    Some(e) => Err(e),
+                    None => Ok(served),
+                }
+            })
+        }
+        _ => {
+            let timeout = cfg.timeout();
+            run_ponger(|| {
+                let mut backoff = Backoff::new(timeout, "the next ping");
+                loop {
+                    let served = echo_all(rx, tx)?;
+                    if served.echoed > 0 {
+                        return Ok(served);
+                    }
+                    backoff.snooze()?;
+                }
+            })
+        }
+    }
+}

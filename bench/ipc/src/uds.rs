@@ -1,0 +1,124 @@
+//! The Unix-domain-socket case: one stream connection, blocking
+//! `write_all` / `read_exact` of the whole message each way.
+
+use std::io::{Read, Write};
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::time::{Duration, Instant};
+
+use crate::driver::{run_pinger, run_ponger, Served};
+use crate::payload::Payload;
+use crate::{socket_path, BenchError, PeerConfig, PeerReport};
+
+fn io_error(what: &'static str) -> impl Fn(std::io::Error) -> BenchError {
+    move |e| match e.kind() {
+        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut => BenchError::Io {
+            what,
+            reason: "nothing arrived within the peer timeout".into(),
+        },
+        _ => BenchError::Io {
+            what,
+            reason: e.to_string(),
+        },
+    }
+}
+
+fn read_msg<M: Payload + bytemuck::Pod>(s: &mut UnixStream) -> Result<M, BenchError> {
+    let mut m: M = bytemuck::Zeroable::zeroed();
+    s.read_exact(bytemuck::bytes_of_mut(&mut m))
+        .map_err(io_error("socket read"))?;
+    Ok(m)
+}
+
+/// The pinger: connects (retrying until the ponger listens), then pings.
+pub(crate) fn ping<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<PeerReport, BenchError> {
+    let path = socket_path(&cfg.run_id, cfg.size);
+    let timeout = cfg.timeout();
+    let start = Instant::now();
+    let mut stream = loop {
+        match UnixStream::connect(&path) {
+            Ok(s) => break s,
+            Err(e) if start.elapsed() > timeout => {
+                return Err(BenchError::setup(format!(
+                    "a connection to {}",
+                    path.display()
+                ))(e.to_string()))
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(2)),
+        }
+    };
+    // A dead ponger ends the run with an error instead of a hang.
+    stream
+        .set_read_timeout(Some(timeout))
+        .map_err(io_error("socket setup"))?;
+    let mut reader = stream.try_clone().map_err(io_error("socket setup"))?;
+    run_pinger(
+        cfg,
+        |m: &M| {
+            stream
+                .write_all(bytemuck::bytes_of(m))
+                .map_err(io_error("socket write"))
+        },
+        |round, _limit| loop {
+            // The stream is reliable: round 0 is sent once and always answered.
+            let m: M = read_msg(&mut reader)?;
+            if m.round() == round {
+                return Ok(Some(m));
+            }
+        },
+    )
+}
+
+/// The ponger: listens, accepts one connection, echoes until the stop.
+pub(crate) fn pong<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<u64, BenchError> {
+    let path = socket_path(&cfg.run_id, cfg.size);
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| BenchError::setup(dir.display().to_string())(e.to_string()))?;
+    }
+    let _ = std::fs::remove_file(&path);
+    let listener = UnixListener::bind(&path)
+        .map_err(|e| BenchError::setup(path.display().to_string())(e.to_string()))?;
+    let result = serve::<M>(&listener, cfg.timeout());
+    let _ = std::fs::remove_file(&path);
+    result
+}
+
+fn serve<M: Payload + bytemuck::Pod>(
+    listener: &UnixListener,
+    timeout: Duration,
+) -> Result<u64, BenchError> {
+    listener
+        .set_nonblocking(true)
+        .map_err(io_error("socket setup"))?;
+    let start = Instant::now();
+    let mut stream = loop {
+        match listener.accept() {
+            Ok((s, _)) => break s,
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                if start.elapsed() > timeout {
+                    return Err(BenchError::Timeout {
+                        what: "the pinger's connection",
+                        secs: timeout.as_secs_f64(),
+                    });
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            Err(e) => return Err(io_error("accept")(e)),
+        }
+    };
+    stream
+        .set_nonblocking(false)
+        .map_err(io_error("socket setup"))?;
+    stream
+        .set_read_timeout(Some(timeout))
+        .map_err(io_error("socket setup"))?;
+    run_ponger(|| {
+        let m: M = read_msg(&mut stream)?;
+        stream
+            .write_all(bytemuck::bytes_of(&m))
+            .map_err(io_error("socket write"))?;
+        let mut served = Served::default();
+        served.add(m.round());
+        Ok(served)
+    })
+}
