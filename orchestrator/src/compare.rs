@@ -2,12 +2,19 @@
 //! measure, run side by side with the method on the same scenario and seed.
 //!
 //! - **method**: the scenario as given (camera + PnP, vertical shift on).
+//! Fix fractions count the follower's `leader_pose` samples that carry a
+//! fix; the modem publishes only when a packet arrives (so its fraction is
+//! the share of packets that decoded), hence the fix rate column.
+//!
 //! - **acoustic**: followers get the parent's pose over a simulated acoustic
 //!   modem instead of the camera (`[acoustic]`: delay range/1500 m/s,
 //!   80 bit/s → one update every 3.2 s, 10% loss). The followers' staleness
 //!   limit is raised to two packet periods so they do not give up between
 //!   packets — the baseline gets a fair chance.
 //! - **no_vertical_shift**: the ablation D_b = 0.
+//!
+//! Writes `compare.md`, `compare.json` and `compare.png`/`.svg` (slot error,
+//! minimum distance and parent fixes over time, one curve per variant).
 
 use std::path::PathBuf;
 
@@ -67,6 +74,8 @@ pub fn row(name: &str, s: &Value) -> Value {
         "collisions": f(s, "/safety/collisions"),
         "min_obstacle_clearance_m": f(s, "/safety/min_obstacle_clearance_m"),
         "min_visible_fraction": min_of(s, "/perception/leader_visible_fraction"),
+        "min_visible_fraction_in_passage": min_of(s, "/perception/parent_visible_fraction_in_passage"),
+        "min_fix_rate_hz": min_of(s, "/perception/parent_fix_rate_hz"),
         "pose_error_p95_m": f(s, "/perception/pose_error_m/p95"),
     })
 }
@@ -74,12 +83,12 @@ pub fn row(name: &str, s: &Value) -> Value {
 /// A markdown table of the rows.
 pub fn table(rows: &[Value], safe: f64) -> String {
     let mut t = String::from(
-        "| variant | slot rms before m | slot rms during m | slot rms after m | min pair m | collisions | min clearance m | min fix fraction | pose err p95 m |\n|---|---|---|---|---|---|---|---|---|\n",
+        "| variant | slot rms before m | slot rms during m | slot rms after m | min pair m | collisions | min clearance m | min fix fraction | min fix fraction in passage | min fix rate Hz | pose err p95 m |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let g = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
         t.push_str(&format!(
-            "| {} | {:.2} | {:.2} | {:.2} | {:.2}{} | {:.0} | {:.2} | {:.3} | {:.2} |\n",
+            "| {} | {:.2} | {:.2} | {:.2} | {:.2}{} | {:.0} | {:.2} | {:.3} | {:.3} | {:.2} | {:.2} |\n",
             r["variant"].as_str().unwrap_or(""),
             g("slot_error_rms_before_m"),
             g("slot_error_rms_during_m"),
@@ -93,6 +102,8 @@ pub fn table(rows: &[Value], safe: f64) -> String {
             g("collisions"),
             g("min_obstacle_clearance_m"),
             g("min_visible_fraction"),
+            g("min_visible_fraction_in_passage"),
+            g("min_fix_rate_hz"),
             g("pose_error_p95_m"),
         ));
     }
@@ -113,12 +124,19 @@ pub fn cmd_compare(cmd: CompareCmd) -> anyhow::Result<()> {
     });
     let settings = RunSettings::new(Mode::Lockstep, cmd.bin_dir, cmd.quiet, 30.0)?;
     let mut rows = Vec::new();
-    for (name, scenario) in variants(&base)? {
+    let mut runs = Vec::new();
+    for (name, mut scenario) in variants(&base)? {
         eprintln!("== {name}");
-        let summary = run_and_summarize(scenario, &out.join(name), &settings)
+        let dir = out.join(name);
+        let summary = run_and_summarize(scenario.clone(), &dir, &settings)
             .with_context(|| format!("variant {name}"))?;
         rows.push(row(name, &summary));
+        crate::check::resolve(&mut scenario)?;
+        let rec = recordings::Recording::open(&dir.join("recording.mcap"))?;
+        runs.push((name, scenario, rec));
     }
+    let refs: Vec<_> = runs.iter().map(|(n, s, r)| (*n, s, r)).collect();
+    crate::plots::write_compare_plot(&refs, &out).context("writing the comparison plot")?;
     let md = format!(
         "# {} (seed {}): method vs acoustic baseline vs no vertical shift\n\nsafe distance {} m\n\n{}",
         base.name,

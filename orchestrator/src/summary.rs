@@ -153,6 +153,8 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
     // Perception: fraction of camera frames with a valid pose; pose error
     // against the truth at the frame's time.
     let mut visible: Map<String, Value> = Map::new();
+    let mut visible_passage: Map<String, Value> = Map::new();
+    let mut fix_rate: Map<String, Value> = Map::new();
     let mut pose_err = Vec::new();
     for v in scenario.vehicles.iter() {
         let Some(parent) = &v.parent else { continue };
@@ -164,6 +166,19 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
             valid as f64 / poses.len() as f64
         };
         visible.insert(v.name.clone(), json!(frac));
+        if outcome.sim_time_s > 0.0 {
+            fix_rate.insert(v.name.clone(), json!(valid as f64 / outcome.sim_time_s));
+        }
+        if avoid_first != u64::MAX {
+            let inside: Vec<_> = poses
+                .iter()
+                .filter(|p| (avoid_first..=avoid_last).contains(&p.header.sim_time_ns))
+                .collect();
+            let seen = inside.iter().filter(|p| p.valid != 0).count();
+            if !inside.is_empty() {
+                visible_passage.insert(v.name.clone(), json!(seen as f64 / inside.len() as f64));
+            }
+        }
         let (tf, tp) = (&tracks[&v.name], &tracks[parent]);
         for p in poses.iter().filter(|p| p.valid != 0) {
             let t = p.header.origin_sim_time_ns;
@@ -259,6 +274,8 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
         },
         "perception": {
             "leader_visible_fraction": visible,
+            "parent_visible_fraction_in_passage": visible_passage,
+            "parent_fix_rate_hz": fix_rate,
             "pose_error_m": { "p50": pct(&pose_err, 0.5), "p95": pct(&pose_err, 0.95) },
         },
         "mission": { "leader_goal_error_m": finite(goal_err) },

@@ -123,17 +123,17 @@ impl Task for CameraTask {
             let now = shoal_runtime::mono_ns();
             let packet = modem.step(ctx.sim_time_s(), now, &truth, &mut self.rng);
             let cov = modem.covariance();
-            let (pose, origin) = match packet {
-                Some(p) => (
-                    pose_sample(true, 0, 0.0, 0, &p.parent_in_body, &cov),
-                    Origin {
-                        mono_ns: p.sent_mono_ns,
-                        sim_time_ns: (p.sent_s * 1e9).round() as u64,
-                    },
-                ),
-                None => (invalid_pose(0), Origin::of(&w.header)),
-            };
-            self.pose_out.publish(pose, ctx, origin)?;
+            // A modem delivers packets, not frames: between packets there is
+            // nothing to publish (an invalid sample would read as a failed
+            // observation and break the follower's reacquisition streak).
+            if let Some(p) = packet {
+                let pose = pose_sample(true, 0, 0.0, 0, &p.parent_in_body, &cov);
+                let origin = Origin {
+                    mono_ns: p.sent_mono_ns,
+                    sim_time_ns: (p.sent_s * 1e9).round() as u64,
+                };
+                self.pose_out.publish(pose, ctx, origin)?;
+            }
             return Ok(());
         }
         let obs = self.observe(&w);
