@@ -27,6 +27,9 @@ pub struct CostReport {
     pub size: usize,
     /// `Sample::is_finite` (run once on publish and once on take).
     pub is_finite_ns: f64,
+    /// The same check written out over the type's float fields (what a
+    /// check generated per type by the `sample!` macro would cost).
+    pub finite_direct_ns: f64,
     /// Building the field description (`Described::fields`) that
     /// `is_finite` walks; included in `is_finite_ns`.
     pub fields_ns: f64,
@@ -36,8 +39,12 @@ pub struct CostReport {
     pub record_ns: f64,
     /// One copy of the sample by value.
     pub copy_ns: f64,
-    /// Raw iceoryx2 loan + write + send, then receive + copy out, one process.
+    /// Raw iceoryx2 loan + write + send, then receive + copy out until
+    /// empty, one process, iceoryx2's default service settings.
     pub hop_raw_ns: f64,
+    /// The same with the service settings shoal's ports use (limits of a
+    /// per-vehicle channel: history 1, 9 subscribers, buffer 16, ...).
+    pub hop_raw_shoal_limits_ns: f64,
     /// shoal `Publisher::publish`, then `Subscriber::take_ready`, one process.
     pub hop_shoal_ns: f64,
 }
@@ -72,6 +79,9 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
     let is_finite_ns = best_of(finite_batch, || {
         black_box(black_box(&sample).is_finite());
     });
+    let finite_direct_ns = best_of(finite_batch, || {
+        black_box(black_box(&sample).payload_is_finite());
+    });
     let fields_ns = best_of(finite_batch, || {
         black_box(S::fields());
     });
@@ -90,52 +100,22 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
     });
     let hops = 5_000;
 
-    // Raw iceoryx2, one process.
+    // Raw iceoryx2, one process: iceoryx2's default service settings, then
+    // the settings shoal's ports ask for (a per-vehicle channel's limits).
     let node = NodeBuilder::new()
         .config(&raw_config(&cfg.run_id))
         .create::<ipc::Service>()
         .map_err(|e| BenchError::setup("the costs node")(dbg(e)))?;
-    let name = bench_service_name(&cfg.run_id, "costs-raw", cfg.size, BenchDirection::Ping);
-    let service = node
-        .service_builder(
-            &ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(dbg(e)))?,
-        )
-        .publish_subscribe::<R>()
-        .open_or_create()
-        .map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
-    let tx = service
-        .publisher_builder()
-        .create()
-        .map_err(|e| BenchError::setup("a raw publisher")(dbg(e)))?;
-    let rx = service
-        .subscriber_builder()
-        .create()
-        .map_err(|e| BenchError::setup("a raw subscriber")(dbg(e)))?;
     let raw = R::make(3);
-    let mut failure: Option<BenchError> = None;
-    let hop_raw_ns = best_of(hops, || {
-        let step = || -> Result<(), String> {
-            tx.loan_uninit()
-                .map_err(dbg)?
-                .write_payload(*black_box(&raw))
-                .send()
-                .map_err(dbg)?;
-            if let Some(s) = rx.receive().map_err(dbg)? {
-                let v: R = *s;
-                black_box(v);
-            }
-            Ok(())
-        };
-        if let Err(reason) = step() {
-            failure = Some(BenchError::Io {
-                what: "raw hop",
-                reason,
-            });
-        }
-    });
-    if let Some(e) = failure {
-        return Err(e);
-    }
+    let hop_raw_ns = raw_hop::<R>(&node, cfg, "costs-raw", None, &raw, hops)?;
+    let hop_raw_shoal_limits_ns = raw_hop::<R>(
+        &node,
+        cfg,
+        "costs-raw-limits",
+        Some(ChannelLimits::vehicle()),
+        &raw,
+        hops,
+    )?;
 
     // shoal's ports, one process.
     let snode = shoal_runtime::domain_node(&cfg.run_id, "bench/costs")?;
@@ -169,11 +149,77 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
     Ok(CostReport {
         size: S::SIZE,
         is_finite_ns,
+        finite_direct_ns,
         fields_ns,
         mono_ns_ns,
         record_ns,
         copy_ns,
         hop_raw_ns,
+        hop_raw_shoal_limits_ns,
         hop_shoal_ns,
     })
+}
+
+/// One raw publish → receive hop, ns per hop; `limits` as shoal's ports set
+/// them, or iceoryx2's defaults.
+fn raw_hop<R: Payload + ZeroCopySend>(
+    node: &Node<ipc::Service>,
+    cfg: &PeerConfig,
+    case: &str,
+    limits: Option<ChannelLimits>,
+    raw: &R,
+    hops: usize,
+) -> Result<f64, BenchError> {
+    let name = bench_service_name(&cfg.run_id, case, cfg.size, BenchDirection::Ping);
+    let service_name =
+        ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+    let builder = node.service_builder(&service_name).publish_subscribe::<R>();
+    let service = match limits {
+        None => builder.open_or_create(),
+        Some(l) => builder
+            .max_publishers(l.max_publishers)
+            .max_subscribers(l.max_subscribers)
+            .max_nodes(l.max_nodes)
+            .subscriber_max_buffer_size(l.max_buffer)
+            .history_size(l.history)
+            .subscriber_max_borrowed_samples(2)
+            .enable_safe_overflow(true)
+            .open_or_create(),
+    }
+    .map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+    let tx = match limits {
+        None => service.publisher_builder().create(),
+        Some(_) => service.publisher_builder().max_loaned_samples(2).create(),
+    }
+    .map_err(|e| BenchError::setup("a raw publisher")(dbg(e)))?;
+    let rx = match limits {
+        None => service.subscriber_builder().create(),
+        Some(_) => service.subscriber_builder().buffer_size(2).create(),
+    }
+    .map_err(|e| BenchError::setup("a raw subscriber")(dbg(e)))?;
+    let mut failure: Option<BenchError> = None;
+    let ns = best_of(hops, || {
+        let step = || -> Result<(), String> {
+            tx.loan_uninit()
+                .map_err(dbg)?
+                .write_payload(*black_box(raw))
+                .send()
+                .map_err(dbg)?;
+            while let Some(s) = rx.receive().map_err(dbg)? {
+                let v: R = *s;
+                black_box(v);
+            }
+            Ok(())
+        };
+        if let Err(reason) = step() {
+            failure = Some(BenchError::Io {
+                what: "raw hop",
+                reason,
+            });
+        }
+    });
+    match failure {
+        Some(e) => Err(e),
+        None => Ok(ns),
+    }
 }

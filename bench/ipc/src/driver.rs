@@ -146,3 +146,80 @@ fn report(cfg: &PeerConfig, size: usize, verified: u64, rtts: &[u64]) -> PeerRep
         max_ns: rtts.iter().copied().max().unwrap_or(0),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::VecDeque;
+
+    use clap::Parser;
+
+    use super::*;
+    use crate::payload::Raw256;
+
+    fn cfg() -> PeerConfig {
+        PeerConfig::parse_from([
+            "peer",
+            "--role",
+            "ping",
+            "--run-id",
+            "unit",
+            "--iterations",
+            "5",
+            "--warmup",
+            "2",
+        ])
+    }
+
+    /// A loopback "transport" that answers every message, corrupting the
+    /// payload of round `bad` (if any).
+    fn loopback(bad: Option<u64>) -> Result<PeerReport, BenchError> {
+        let queue = std::cell::RefCell::new(VecDeque::new());
+        run_pinger::<Raw256>(
+            &cfg(),
+            |m| {
+                let mut echo = *m;
+                if Some(m.round) == bad {
+                    echo.words[30] ^= 1;
+                }
+                queue.borrow_mut().push_back(echo);
+                Ok(())
+            },
+            |round, _| {
+                while let Some(m) = queue.borrow_mut().pop_front() {
+                    if m.round == round {
+                        return Ok(Some(m));
+                    }
+                }
+                Ok(None)
+            },
+        )
+    }
+
+    #[test]
+    fn pinger_counts_every_intact_round_trip() {
+        let r = loopback(None).unwrap();
+        assert_eq!(r.verified, 7);
+        assert_eq!(r.iterations, 5);
+        assert!(r.min_ns <= r.p50_ns && r.p50_ns <= r.max_ns);
+    }
+
+    #[test]
+    fn pinger_refuses_a_reply_with_a_changed_payload() {
+        assert!(matches!(
+            loopback(Some(4)),
+            Err(BenchError::Corrupt { round: 4 })
+        ));
+    }
+
+    #[test]
+    fn ponger_stops_at_the_stop_sample_and_counts_the_rest() {
+        let mut rounds = vec![0, 1, 2, STOP].into_iter();
+        let echoed = run_ponger(|| {
+            let mut s = Served::default();
+            s.add(rounds.next().unwrap());
+            Ok(s)
+        })
+        .unwrap();
+        assert_eq!(echoed, 3);
+    }
+}

@@ -179,7 +179,7 @@ pub struct PeerConfig {
     #[arg(long, default_value_t = 1_000)]
     pub warmup: u64,
     /// The iceoryx2 domain (`shoal_<run-id>_` in /dev/shm, /tmp/shoal/<run-id>/);
-    /// the Unix socket lives in that directory too.
+    /// the Unix socket lives in that directory too. At most 26 bytes.
     #[arg(long)]
     pub run_id: String,
     /// Pin this process to one CPU.
@@ -308,8 +308,18 @@ pub(crate) fn dbg<E: std::fmt::Debug>(e: E) -> String {
     format!("{e:?}")
 }
 
+/// Longest run id whose iceoryx2 event sockets
+/// (`/tmp/shoal/<id>/shoal_<id>_<30-digit hash>.event`) still fit the
+/// 107 bytes of a Unix socket path.
+pub const MAX_RUN_ID_LEN: usize = 26;
+
 /// Runs one peer as `cfg` says (pins it to `cfg.cpu` first).
 pub fn run_peer(cfg: &PeerConfig) -> Result<PeerOutput, BenchError> {
+    if cfg.run_id.len() > MAX_RUN_ID_LEN {
+        return Err(BenchError::setup(format!("the domain `{}`", cfg.run_id))(format!(
+            "a run id longer than {MAX_RUN_ID_LEN} bytes makes iceoryx2's event socket paths too long"
+        )));
+    }
     if let Some(cpu) = cfg.cpu {
         pin_to(cpu)?;
     }

@@ -18,6 +18,11 @@ pub trait Payload: Copy + Send + std::fmt::Debug + 'static {
     fn make(round: u64) -> Self;
     /// The round number it carries.
     fn round(&self) -> u64;
+    /// True when every float of the message is finite, checked field by
+    /// field in code (no schema walk); raw messages hold no floats.
+    fn payload_is_finite(&self) -> bool {
+        true
+    }
     /// True when `other` carries the same round number and payload
     /// (shoal's header, which each publisher restamps, is not compared).
     fn same_payload(&self, other: &Self) -> bool;
@@ -98,6 +103,10 @@ macro_rules! shoal_payload {
             }
             fn same_payload(&self, other: &Self) -> bool {
                 self.round == other.round && self.payload == other.payload
+            }
+            fn payload_is_finite(&self) -> bool {
+                // The header holds integers only; `round` too.
+                self.payload.iter().all(|v| v.is_finite())
             }
         }
     };
