@@ -387,9 +387,11 @@ impl Scenario {
         Self::from_toml(PAPER_TOML)
     }
 
-    /// Parses and validates TOML text.
+    /// Parses and validates TOML text. A syntax error, an unknown key or a
+    /// value of the wrong type is reported with the key's full path
+    /// (`vehicles[1].slot_m`) and its line.
     pub fn from_toml(text: &str) -> Result<Self, ScenarioError> {
-        let s: Scenario = toml::from_str(text).map_err(|e| ScenarioError::Parse(e.to_string()))?;
+        let s: Scenario = toml::from_str(text).map_err(|e| parse_error("", text, &e))?;
         s.validate()?;
         Ok(s)
     }
@@ -415,9 +417,7 @@ impl Scenario {
             "acoustic" => &self.acoustic,
             other => return Err(invalid(other, "no such section")),
         };
-        toml::Value::Table(table.clone())
-            .try_into()
-            .map_err(|e: toml::de::Error| invalid(key, e.message().to_string()))
+        from_table(key, table)
     }
 
     /// Parses the obstacle list into the sonar's obstacle type.
@@ -425,18 +425,29 @@ impl Scenario {
         self.obstacles
             .iter()
             .enumerate()
-            .map(|(i, t)| {
-                toml::Value::Table(t.clone())
-                    .try_into()
-                    .map_err(|e: toml::de::Error| {
-                        invalid(format!("obstacles[{i}]"), e.message().to_string())
-                    })
-            })
+            .map(|(i, t)| from_table(&format!("obstacles[{i}]"), t))
             .collect()
     }
 
     /// Checks the scenario's own keys: names, the formation tree, sizes, rates.
     pub fn validate(&self) -> Result<(), ScenarioError> {
+        // The name becomes a directory name (`runs/<name>-<time>`): no paths.
+        if self.name.is_empty()
+            || self.name.len() > MAX_NAME_LEN
+            || self.name.starts_with('.')
+            || !self
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
+        {
+            return Err(invalid(
+                "name",
+                format!(
+                    "`{}` must be 1 to {MAX_NAME_LEN} of [A-Za-z0-9_.-], not starting with `.`",
+                    self.name
+                ),
+            ));
+        }
         if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
             return Err(invalid(
                 "duration_s",
@@ -498,8 +509,14 @@ impl Scenario {
                 format!("must be in 1..=1024, got {}", self.recording.buffer),
             ));
         }
-        if self.recording.chunk_kib == 0 {
-            return Err(invalid("recording.chunk_kib", "must be > 0"));
+        if self.recording.chunk_kib == 0 || self.recording.chunk_kib > 1 << 20 {
+            return Err(invalid(
+                "recording.chunk_kib",
+                format!(
+                    "must be in 1..=1048576 KiB, got {}",
+                    self.recording.chunk_kib
+                ),
+            ));
         }
         self.validate_vehicles()
     }
@@ -522,6 +539,7 @@ impl Scenario {
         for (i, v) in self.vehicles.iter().enumerate() {
             let key = format!("vehicles[{i}].name");
             if v.name.is_empty()
+                || v.name.len() > MAX_NAME_LEN
                 || v.name == RUN_VEHICLE
                 || !v
                     .name
@@ -530,7 +548,10 @@ impl Scenario {
             {
                 return Err(invalid(
                     key,
-                    format!("`{}` must be [A-Za-z0-9_]+ and not `{RUN_VEHICLE}`", v.name),
+                    format!(
+                        "`{}` must be [A-Za-z0-9_]{{1,{MAX_NAME_LEN}}} and not `{RUN_VEHICLE}`",
+                        v.name
+                    ),
                 ));
             }
             if index.insert(&v.name, i).is_some() {
@@ -764,8 +785,149 @@ impl Scenario {
     }
 }
 
+/// Most vehicles a scenario may hold: the world snapshot's fixed size
+/// (`ipc_types::MAX_VEHICLES`; the orchestrator asserts the two agree).
+pub const MAX_VEHICLES: usize = 256;
+
 const fn ipc_types_max_vehicles() -> usize {
-    256
+    MAX_VEHICLES
+}
+
+/// Longest vehicle name (it becomes part of iceoryx2 service names).
+pub const MAX_NAME_LEN: usize = 64;
+
+/// Deserialises one section table into `T`, naming the offending key
+/// (`camera.fov_deg`) on error. The table is written back to TOML text and
+/// parsed from there, so the error carries a span to find the key by.
+fn from_table<T: serde::de::DeserializeOwned>(
+    section: &str,
+    table: &toml::Table,
+) -> Result<T, ScenarioError> {
+    let text = match toml::to_string(table) {
+        Ok(t) => t,
+        Err(e) => return Err(invalid(section, e.to_string())),
+    };
+    let found = |e: &toml::de::Error| {
+        let at = e.span().map(|r| r.start);
+        if e.message().starts_with("missing field") {
+            table_at(&text, at)
+        } else {
+            key_at(&text, at)
+        }
+    };
+    toml::from_str(&text).map_err(|e| match found(&e) {
+        Some(k) => invalid(format!("{section}.{k}"), e.message().trim().to_string()),
+        None => invalid(section, e.message().trim().to_string()),
+    })
+}
+
+/// A TOML error of the top-level file as a [`ScenarioError::Parse`] naming
+/// the key and the line.
+fn parse_error(prefix: &str, text: &str, e: &toml::de::Error) -> ScenarioError {
+    let start = e.span().map(|r| r.start);
+    let line = start.map(|o| text.get(..o).map_or(0, |t| t.matches('\n').count()) + 1);
+    let msg = e.message().trim();
+    // A missing key is reported on its table, not on whatever key the span starts at.
+    let missing = msg.starts_with("missing field");
+    let found = if missing {
+        table_at(text, start)
+    } else {
+        key_at(text, start)
+    };
+    // A missing top-level key has no line worth naming.
+    let line = if missing && found.is_none() {
+        None
+    } else {
+        line
+    };
+    let key = found.map(|k| {
+        if prefix.is_empty() {
+            k
+        } else {
+            format!("{prefix}.{k}")
+        }
+    });
+    ScenarioError::Parse(match (key, line) {
+        (Some(k), Some(l)) => format!("{k}: {msg} (line {l})"),
+        (None, Some(l)) => format!("line {l}: {msg}"),
+        (Some(k), None) => format!("{k}: {msg}"),
+        (None, None) => msg.to_string(),
+    })
+}
+
+/// The dotted path of the key at byte `offset` of a TOML document, found
+/// from the table headers above it: `vehicles[1].slot_m` for a key under
+/// the second `[[vehicles]]`, `rates` for the `[rates]` header itself.
+/// Best effort (multi-line strings that hold `[` at a line start confuse
+/// it); `None` when nothing can be named.
+pub fn key_at(text: &str, offset: Option<usize>) -> Option<String> {
+    path_at(text, offset, true)
+}
+
+/// The table (`vehicles[1]`, `camera`) that byte `offset` lies in; `None`
+/// at the top level.
+pub fn table_at(text: &str, offset: Option<usize>) -> Option<String> {
+    path_at(text, offset, false)
+}
+
+fn path_at(text: &str, offset: Option<usize>, with_key: bool) -> Option<String> {
+    let offset = offset?.min(text.len());
+    let mut header = String::new();
+    let mut counts: HashMap<String, usize> = HashMap::new();
+    let mut pos = 0usize;
+    for line in text.split_inclusive('\n') {
+        let end = pos + line.len();
+        let t = line.trim();
+        let on_line = offset >= pos && (offset < end || end == text.len());
+        if let Some(inner) = t.strip_prefix("[[").and_then(|r| r.split("]]").next()) {
+            let name = clean_key(inner);
+            let n = counts.entry(name.clone()).or_insert(0);
+            header = format!("{name}[{n}]");
+            *n += 1;
+            if on_line {
+                return Some(header);
+            }
+        } else if let Some(inner) = t.strip_prefix('[').and_then(|r| r.split(']').next()) {
+            header = clean_key(inner);
+            // `[vehicles.x]` under an array of tables belongs to its last element.
+            if let Some((first, rest)) = header.split_once('.') {
+                if let Some(n) = counts.get(first) {
+                    header = format!("{first}[{}].{rest}", n.saturating_sub(1));
+                }
+            }
+            if on_line {
+                return Some(header);
+            }
+        } else if on_line && with_key {
+            let key = t.split_once('=').map(|(k, _)| clean_key(k));
+            return match key {
+                Some(k) if !k.is_empty() && !t.starts_with('#') => Some(if header.is_empty() {
+                    k
+                } else {
+                    format!("{header}.{k}")
+                }),
+                _ if header.is_empty() => None,
+                _ => Some(header),
+            };
+        }
+        if on_line {
+            break;
+        }
+        pos = end;
+    }
+    (!header.is_empty()).then_some(header)
+}
+
+fn clean_key(k: &str) -> String {
+    k.split('.')
+        .map(|p| {
+            p.trim()
+                .trim_matches(|c| c == '[' || c == ']')
+                .trim_matches('"')
+                .trim_matches('\'')
+        })
+        .collect::<Vec<_>>()
+        .join(".")
 }
 
 impl Scenario {
