@@ -398,6 +398,77 @@ sample! {
     }
 }
 
+/// Most input channel kinds one process reports latency for.
+pub const MAX_HOPS: usize = 12;
+
+described! {
+    /// Publish → take latency of one input channel kind of one process
+    /// (every subscription of that kind merged), cumulative since the start.
+    pub struct HopStats("shoal/HopStats", "shoal.HopStats.v1") {
+        /// Channel kind (`truth`, `world`, ...), NUL-padded ASCII.
+        pub channel: [u8; 24],
+        /// Samples taken.
+        pub count: u64,
+        /// Median, ns.
+        pub p50_ns: u64,
+        /// 99th percentile, ns.
+        pub p99_ns: u64,
+        /// 99.9th percentile, ns.
+        pub p999_ns: u64,
+        /// Largest, ns.
+        pub max_ns: u64,
+    }
+}
+
+sample! {
+    /// One process's runtime statistics, cumulative since its start, published
+    /// on the run's `stats` channel about once a second (simulated time in
+    /// lockstep, wall time in realtime) and recorded.
+    pub struct ProcessStats("shoal/ProcessStats", "shoal.ProcessStats.v1", size = 144 + 64 * MAX_HOPS) {
+        /// Common header.
+        pub header: Header,
+        /// Vehicle (`run` for run-level processes), NUL-padded ASCII.
+        pub vehicle: [u8; 16],
+        /// Process kind, NUL-padded ASCII.
+        pub process: [u8; 16],
+        /// Steps taken.
+        pub steps: u64,
+        /// Realtime: activations that started a whole period or more late.
+        pub deadline_misses: u64,
+        /// Samples lost (gaps in publishers' sequences), all inputs.
+        pub lost: u64,
+        /// Samples rejected for a non-finite value, all inputs.
+        pub rejected: u64,
+        /// Step duration (wake-up to step end) median, ns.
+        pub step_p50_ns: u64,
+        /// Step duration 99th percentile, ns.
+        pub step_p99_ns: u64,
+        /// Longest step, ns.
+        pub step_max_ns: u64,
+        /// Realtime: lateness of the wake-up after its activation time, 99th percentile, ns.
+        pub wake_late_p99_ns: u64,
+        /// Entries of `hops` in use.
+        pub hop_count: u64,
+        /// Per input channel kind.
+        pub hops: [HopStats; MAX_HOPS],
+    }
+}
+
+/// Copies `s` into a NUL-padded fixed-size ASCII field (truncating).
+pub fn fixed_str<const N: usize>(s: &str) -> [u8; N] {
+    let mut out = [0u8; N];
+    for (o, b) in out.iter_mut().zip(s.bytes()) {
+        *o = b;
+    }
+    out
+}
+
+/// Reads a NUL-padded fixed-size ASCII field.
+pub fn str_of(b: &[u8]) -> &str {
+    let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+    std::str::from_utf8(&b[..end]).unwrap_or("?")
+}
+
 /// A per-vehicle channel of the channel table in DESIGN.md.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Channel {
@@ -470,6 +541,8 @@ pub enum RunChannel {
     Clock,
     /// Event service on which every process reports a finished lockstep step.
     Done,
+    /// [`ProcessStats`] of every process.
+    Stats,
 }
 
 impl RunChannel {
@@ -479,6 +552,7 @@ impl RunChannel {
             RunChannel::World => "world",
             RunChannel::Clock => "clock",
             RunChannel::Done => "done",
+            RunChannel::Stats => "stats",
         }
     }
 }
@@ -533,6 +607,7 @@ mod tests {
         check_layout::<PlannerState>();
         check_layout::<MpcStats>();
         check_layout::<Clock>();
+        check_layout::<ProcessStats>();
     }
 
     #[test]

@@ -2,16 +2,16 @@
 //! measure, run side by side with the method on the same scenario and seed.
 //!
 //! - **method**: the scenario as given (camera + PnP, vertical shift on).
-//! Fix fractions count the follower's `leader_pose` samples that carry a
-//! fix; the modem publishes only when a packet arrives (so its fraction is
-//! the share of packets that decoded), hence the fix rate column.
-//!
 //! - **acoustic**: followers get the parent's pose over a simulated acoustic
 //!   modem instead of the camera (`[acoustic]`: delay range/1500 m/s,
 //!   80 bit/s → one update every 3.2 s, 10% loss). The followers' staleness
 //!   limit is raised to two packet periods so they do not give up between
 //!   packets — the baseline gets a fair chance.
 //! - **no_vertical_shift**: the ablation D_b = 0.
+//!
+//! Fix fractions count the follower's `leader_pose` samples that carry a
+//! fix; the modem publishes only when a packet arrives (so its fraction is
+//! the share of packets that decoded), hence the fix rate column.
 //!
 //! Writes `compare.md`, `compare.json` and `compare.png`/`.svg` (slot error,
 //! minimum distance and parent fixes over time, one curve per variant).

@@ -95,6 +95,11 @@ struct RunCmd {
     /// No progress bar and no closing table.
     #[arg(long, short)]
     quiet: bool,
+    /// Adaptive wait: every process polls this long for its next wake-up
+    /// before blocking, µs (0 = block at once, the default; worth it only
+    /// with a spare core per busy process).
+    #[arg(long, default_value_t = 0)]
+    spin_us: u64,
 }
 
 #[derive(Debug, clap::Args)]
@@ -130,6 +135,7 @@ struct RunSettings {
     bin_dir: PathBuf,
     progress: bool,
     tick_timeout: Duration,
+    spin_us: u64,
 }
 
 impl RunSettings {
@@ -151,6 +157,7 @@ impl RunSettings {
             bin_dir,
             progress: !quiet,
             tick_timeout: Duration::from_secs_f64(tick_timeout.max(0.1)),
+            spin_us: 0,
         })
     }
 }
@@ -175,6 +182,7 @@ fn run_and_summarize(
         bin_dir: settings.bin_dir.clone(),
         progress: settings.progress,
         tick_timeout: settings.tick_timeout,
+        spin_us: settings.spin_us,
     };
     let outcome = run::run(&opts)?;
     let rec = recordings::Recording::open(&outcome.recording)?;
@@ -198,7 +206,8 @@ fn cmd_run(cmd: RunCmd) -> anyhow::Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| run::default_out(&scenario));
-    let settings = RunSettings::new(cmd.mode, cmd.bin_dir, cmd.quiet, cmd.tick_timeout)?;
+    let mut settings = RunSettings::new(cmd.mode, cmd.bin_dir, cmd.quiet, cmd.tick_timeout)?;
+    settings.spin_us = cmd.spin_us;
     let summary = run_and_summarize(scenario, &out, &settings)?;
     if !cmd.quiet {
         print_table(&summary);

@@ -1432,10 +1432,7 @@ where
         // A baseline that diverges must not flatten the others: the scale is
         // the method's (or every variant's, for the fix rate).
         let scaled = if i == 2 { series } else { &series[..1] };
-        scaled
-            .iter()
-            .flat_map(|s| pick(s))
-            .for_each(|p| yb.add(p.1));
+        scaled.iter().flat_map(pick).for_each(|p| yb.add(p.1));
         let y = 0.0..yb.hi.unwrap_or(1.0).max(0.5) * 1.15;
         let (plot, legend_area) = split_legend(&area);
         let mut leg = Legend::new();

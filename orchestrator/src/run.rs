@@ -32,6 +32,9 @@ pub struct RunOptions {
     pub progress: bool,
     /// Longest a lockstep tick may take before the run is declared hung, s.
     pub tick_timeout: Duration,
+    /// Adaptive wait budget of every process (and of the orchestrator's wait
+    /// for `done`), µs; 0 = block at once.
+    pub spin_us: u64,
 }
 
 /// What a run produced.
@@ -53,6 +56,8 @@ pub struct RunOutcome {
     pub processes: usize,
     /// Ticks driven (lockstep).
     pub ticks: u64,
+    /// Every process's runtime statistics (its exit file).
+    pub stats: Vec<shoal_runtime::stats::StatsFile>,
 }
 
 /// Why a run ended early.
@@ -172,6 +177,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
                 format!("{}", 1.0 / scenario.rate_hz(p.kind)),
                 "--epoch-mono-ns".into(),
                 epoch.to_string(),
+                "--phase-s".into(),
+                format!("{}", p.phase as f64 * scenario.rates.tick_s),
+                "--spin-us".into(),
+                opts.spin_us.to_string(),
                 "--scenario".into(),
                 scenario_path.display().to_string(),
             ];
@@ -195,6 +204,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             &all,
             Duration::from_secs(60).max(opts.tick_timeout),
             0.0,
+            Duration::ZERO,
         )?;
         match opts.mode {
             Mode::Lockstep => lockstep(opts, &mut ports, &mut sup, &procs),
@@ -208,6 +218,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         Duration::from_secs(5),
     );
     drop(ports);
+    let stats = shoal_runtime::stats::read_stats_files(&run_id);
     shoal_runtime::cleanup_domain(&run_id);
 
     let (wall_time_s, ticks) = result?;
@@ -249,6 +260,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         max_rss_kib,
         processes: procs.len(),
         ticks,
+        stats,
     })
 }
 
@@ -311,6 +323,7 @@ fn lockstep(
             &due,
             opts.tick_timeout,
             sim as f64 * 1e-9,
+            Duration::from_micros(opts.spin_us),
         )?;
         if tick % 50 == 0 {
             bar.set_position((sim as f64 * 1e-9) as u64);
@@ -379,6 +392,7 @@ fn wait_done(
     expected: &[usize],
     timeout: Duration,
     sim_time_s: f64,
+    spin: Duration,
 ) -> anyhow::Result<()> {
     let mut pending = vec![false; procs.len()];
     let mut remaining = 0usize;
@@ -390,6 +404,17 @@ fn wait_done(
     }
     let start = Instant::now();
     let slice = Duration::from_millis(50);
+    // Adaptive wait: poll first, for at most the spin budget.
+    while remaining > 0 && start.elapsed() < spin {
+        let _ = ports.done.try_wait(|ev| {
+            let id = ev.id.as_value();
+            if id < pending.len() && pending[id] {
+                pending[id] = false;
+                remaining -= 1;
+            }
+        });
+        std::hint::spin_loop();
+    }
     while remaining > 0 {
         ports
             .done

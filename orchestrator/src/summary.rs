@@ -37,9 +37,29 @@ struct Track {
     q: Vec<UnitQuaternion<f64>>,
 }
 
+/// Largest gap across which a position is interpolated, ns.
+const MAX_GAP_NS: u64 = 250_000_000;
+
 impl Track {
-    fn at(&self, t: u64) -> Option<usize> {
-        self.t.binary_search(&t).ok()
+    /// Position and attitude at `t`: the sample stamped `t` (lockstep: every
+    /// plant steps on the same ticks), else interpolated between the samples
+    /// around it when they are at most [`MAX_GAP_NS`] apart (realtime: each
+    /// plant stamps its own wake-up time). The attitude is the nearer one's.
+    fn at(&self, t: u64) -> Option<(Vector3<f64>, UnitQuaternion<f64>)> {
+        match self.t.binary_search(&t) {
+            Ok(i) => Some((self.p[i], self.q[i])),
+            Err(0) => None,
+            Err(i) if i == self.t.len() => None,
+            Err(i) => {
+                let (t0, t1) = (self.t[i - 1], self.t[i]);
+                if t1 - t0 > MAX_GAP_NS {
+                    return None;
+                }
+                let a = (t - t0) as f64 / (t1 - t0) as f64;
+                let q = if a < 0.5 { self.q[i - 1] } else { self.q[i] };
+                Some((self.p[i - 1] + (self.p[i] - self.p[i - 1]) * a, q))
+            }
+        }
     }
     /// The last sample at or before `t`.
     fn before(&self, t: u64) -> Option<usize> {
@@ -79,8 +99,8 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
             for i in 0..names.len() {
                 for j in i + 1..names.len() {
                     let (a, b) = (&tracks[&names[i]], &tracks[&names[j]]);
-                    if let (Some(ia), Some(ib)) = (a.at(t), b.at(t)) {
-                        let d = (a.p[ia] - b.p[ib]).norm();
+                    if let (Some((pa, _)), Some((pb, _))) = (a.at(t), b.at(t)) {
+                        let d = (pa - pb).norm();
                         if d < min_pair {
                             min_pair = d;
                             min_pair_names = format!("{}-{}", names[i], names[j]);
@@ -134,8 +154,8 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
         let (tf, tp) = (&tracks[&v.name], &tracks[parent]);
         let mut errs = Vec::new();
         for (i, &t) in tf.t.iter().enumerate() {
-            let Some(j) = tp.at(t) else { continue };
-            let target = tp.p[j] + tp.q[j] * Vector3::from(slot);
+            let Some((pp, qp)) = tp.at(t) else { continue };
+            let target = pp + qp * Vector3::from(slot);
             let e = (tf.p[i] - target).norm();
             errs.push(e);
             if t < avoid_first {
@@ -226,6 +246,7 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
         }
     }
     let e2e = e2e.summary();
+    let runtime = runtime_stats(&outcome.stats);
 
     // MPC.
     let mut solve = Vec::new();
@@ -281,7 +302,13 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
         "mission": { "leader_goal_error_m": finite(goal_err) },
         "latency_us": {
             "end_to_end": e2e,
+            "hops": runtime.hops,
         },
+        "deadline_misses": runtime.deadline_misses,
+        "step_us": runtime.step_us,
+        "wake_late_us": runtime.wake_late_us,
+        "samples_lost": runtime.lost,
+        "samples_rejected": runtime.rejected,
         "mpc": {
             "solve_us": { "p50": pct(&solve, 0.5), "p99": pct(&solve, 0.99), "max": solve.last().copied().unwrap_or(0.0) },
             "failures": failures,
@@ -294,4 +321,69 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
             "truncated": rec.truncated(),
         },
     })
+}
+
+/// The processes' runtime statistics, merged.
+struct RuntimeStats {
+    /// Publish → take latency per input channel kind, every taker merged.
+    hops: Value,
+    /// Realtime deadline misses per process kind.
+    deadline_misses: Value,
+    /// Step duration per process kind.
+    step_us: Value,
+    /// Realtime wake-up lateness per process kind.
+    wake_late_us: Value,
+    /// Lost samples per input channel kind.
+    lost: Value,
+    /// Rejected (non-finite) samples per input channel kind.
+    rejected: Value,
+}
+
+/// Merges the exit files' histograms: per input channel kind for the hops,
+/// per process kind for steps, wake-ups and deadline misses.
+fn runtime_stats(files: &[shoal_runtime::stats::StatsFile]) -> RuntimeStats {
+    use shoal_runtime::LatencyRecorder;
+    let mut hops: BTreeMap<String, LatencyRecorder> = BTreeMap::new();
+    let mut lost: BTreeMap<String, u64> = BTreeMap::new();
+    let mut rejected: BTreeMap<String, u64> = BTreeMap::new();
+    let mut steps: BTreeMap<String, LatencyRecorder> = BTreeMap::new();
+    let mut late: BTreeMap<String, LatencyRecorder> = BTreeMap::new();
+    let mut misses: BTreeMap<String, u64> = BTreeMap::new();
+    for f in files {
+        for h in &f.hops {
+            hops.entry(h.kind.clone())
+                .or_default()
+                .add_buckets(&h.latency_ns);
+            *lost.entry(h.kind.clone()).or_default() += h.lost;
+            *rejected.entry(h.kind.clone()).or_default() += h.rejected;
+        }
+        steps
+            .entry(f.process.clone())
+            .or_default()
+            .add_buckets(&f.step_ns);
+        if !f.wake_late_ns.is_empty() {
+            late.entry(f.process.clone())
+                .or_default()
+                .add_buckets(&f.wake_late_ns);
+        }
+        *misses.entry(f.process.clone()).or_default() += f.deadline_misses;
+    }
+    let table = |m: &BTreeMap<String, LatencyRecorder>| -> Value {
+        Value::Object(
+            m.iter()
+                .map(|(k, r)| (k.clone(), json!(r.summary())))
+                .collect(),
+        )
+    };
+    let counts = |m: &BTreeMap<String, u64>| -> Value {
+        Value::Object(m.iter().map(|(k, n)| (k.clone(), json!(n))).collect())
+    };
+    RuntimeStats {
+        hops: table(&hops),
+        deadline_misses: counts(&misses),
+        step_us: table(&steps),
+        wake_late_us: table(&late),
+        lost: counts(&lost),
+        rejected: counts(&rejected),
+    }
 }

@@ -145,6 +145,14 @@ impl RecorderTask {
             &ChannelLimits::world(scenario.vehicles.len()),
             buffer.min(4),
         )?);
+        taps.push(open_tap::<ipc_types::ProcessStats>(
+            rt,
+            &mut writer,
+            &ipc_types::run_service_name(&run, RunChannel::Stats),
+            "/stats",
+            &shoal_runtime::stats::stats_limits(rt.args().processes),
+            4,
+        )?);
         for v in &scenario.vehicles {
             for ch in Channel::ALL {
                 if ch.follower_only() && v.parent.is_none() {

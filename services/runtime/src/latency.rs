@@ -1,5 +1,6 @@
 //! Latency histograms (HDR), recorded on the hot path with one subtraction
-//! and one counter increment per sample.
+//! and one counter increment per sample; percentiles are computed only when
+//! reported (once a second, and at exit).
 
 use hdrhistogram::Histogram;
 
@@ -57,6 +58,37 @@ impl LatencyRecorder {
         self.hist.as_ref().map_or(0, |h| h.len())
     }
 
+    /// The recorded buckets as `(value ns, count)` pairs (for files).
+    pub fn buckets(&self) -> Vec<(u64, u64)> {
+        self.hist.as_ref().map_or_else(Vec::new, |h| {
+            h.iter_recorded()
+                .map(|v| (v.value_iterated_to(), v.count_at_value()))
+                .collect()
+        })
+    }
+
+    /// Adds `(value ns, count)` pairs written by [`LatencyRecorder::buckets`].
+    pub fn add_buckets(&mut self, buckets: &[(u64, u64)]) {
+        if let Some(h) = self.hist.as_mut() {
+            for &(v, n) in buckets {
+                let _ = h.record_n(v.clamp(1, h.high()), n);
+            }
+        }
+    }
+
+    /// Value at quantile `q` in ns (0 when empty).
+    pub fn quantile_ns(&self, q: f64) -> u64 {
+        self.hist
+            .as_ref()
+            .filter(|h| !h.is_empty())
+            .map_or(0, |h| h.value_at_quantile(q))
+    }
+
+    /// Largest value, ns (0 when empty).
+    pub fn max_ns(&self) -> u64 {
+        self.hist.as_ref().map_or(0, |h| h.max())
+    }
+
     /// p50/p99/p99.9/max in µs.
     pub fn summary(&self) -> LatencySummary {
         match &self.hist {
@@ -69,5 +101,24 @@ impl LatencyRecorder {
             },
             _ => LatencySummary::default(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn buckets_round_trip_through_a_file_form() {
+        let mut a = LatencyRecorder::new();
+        for v in [1_000u64, 2_000, 2_000, 50_000, 1_000_000] {
+            a.record_ns(v);
+        }
+        let mut b = LatencyRecorder::new();
+        b.add_buckets(&a.buckets());
+        assert_eq!(b.count(), 5);
+        assert_eq!(a.summary(), b.summary());
+        assert_eq!(a.max_ns(), b.max_ns());
+        assert_eq!(b.quantile_ns(0.5), a.quantile_ns(0.5));
     }
 }

@@ -25,7 +25,7 @@
 //! # fn main() -> anyhow::Result<()> {
 //! let args = RunArgs { run_id: "test".into(), vehicle: "L".into(), process: "idle".into(),
 //!     index: 0, mode: shoal_runtime::Mode::Lockstep, period_s: 0.1, epoch_mono_ns: 0,
-//!     processes: 1 };
+//!     processes: 1, phase_s: 0.0, spin_us: 0 };
 //! let rt = Runtime::new(&args)?;
 //! rt.run(Idle)?;
 //! # Ok(()) }
@@ -35,6 +35,7 @@ pub mod convert;
 pub mod domain;
 pub mod latency;
 pub mod ports;
+pub mod stats;
 
 use std::time::Duration;
 
@@ -95,6 +96,15 @@ pub struct RunArgs {
     /// Monotonic time (ns) at which simulated time 0 starts, realtime only.
     #[arg(long, default_value_t = 0)]
     pub epoch_mono_ns: u64,
+    /// Offset of this process's activations within its period, s (realtime:
+    /// the pipeline plant → world → sensors → planner → mpc is phased like
+    /// a lockstep frame, so a chain does not wait a whole period per hop).
+    #[arg(long, default_value_t = 0.0)]
+    pub phase_s: f64,
+    /// Adaptive wait: after a step, poll for the next wake-up this long
+    /// before blocking, µs (0 = always block). Only worth it with spare cores.
+    #[arg(long, default_value_t = 0)]
+    pub spin_us: u64,
 }
 
 /// Errors of the runtime.
@@ -281,11 +291,20 @@ impl Runtime {
     }
 
     /// Runs `task` until SIGINT/SIGTERM, in the mode of the run.
+    ///
+    /// Either way the process's statistics are published on the run's
+    /// `stats` channel once a second and written to its stats file at exit.
     pub fn run<T: Task>(self, task: T) -> Result<RunReport, RuntimeError> {
-        match self.args.mode {
-            Mode::Lockstep => self.run_lockstep(task),
-            Mode::Realtime => self.run_realtime(task),
+        let mut stats = stats::StatsReporter::new(&self.node, &self.args);
+        let mut report = RunReport::default();
+        let result = match self.args.mode {
+            Mode::Lockstep => self.run_lockstep(task, &mut stats, &mut report),
+            Mode::Realtime => self.run_realtime(task, &mut stats, &mut report),
+        };
+        if let Err(e) = stats.write_file(&report) {
+            tracing::warn!(%e, "cannot write the stats file");
         }
+        result.map(|()| report)
     }
 
     fn done_notifier(
@@ -302,7 +321,12 @@ impl Runtime {
             })
     }
 
-    fn run_lockstep<T: Task>(self, mut task: T) -> Result<RunReport, RuntimeError> {
+    fn run_lockstep<T: Task>(
+        &self,
+        mut task: T,
+        stats: &mut stats::StatsReporter,
+        report: &mut RunReport,
+    ) -> Result<(), RuntimeError> {
         let wake_name =
             ipc_types::wake_service_name(&self.args.run_id, &self.args.vehicle, &self.args.process);
         let wake_service = open_wake(
@@ -341,57 +365,70 @@ impl Runtime {
         let guard = waitset
             .attach_notification(&wake)
             .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
-        let mut report = RunReport::default();
         let mut last_sim: Option<u64> = None;
         let mut failure: Option<RuntimeError> = None;
         let mut clock = clock;
         let mut latest_clock: Option<Clock> = None;
+        let spin_ns = self.args.spin_us * 1_000;
         let on_event = |id: WaitSetAttachmentId<ipc::Service>| {
             if !id.has_event_from(&guard) {
                 return CallbackProgression::Continue;
             }
-            let mut woken = false;
-            let _ = wake.try_wait(|_| woken = true);
-            if !woken {
-                return CallbackProgression::Continue;
-            }
-            match clock.drain_latest() {
-                Ok(Some(c)) => latest_clock = Some(c),
-                Ok(None) => {}
-                Err(e) => {
-                    failure = Some(e);
+            // Step on every wake-up; with a spin budget, poll for the next
+            // one before going back to block in the WaitSet.
+            let mut spin_until = 0u64;
+            loop {
+                let mut woken = false;
+                let _ = wake.try_wait(|_| woken = true);
+                if !woken {
+                    if mono_ns() < spin_until {
+                        std::hint::spin_loop();
+                        continue;
+                    }
+                    return CallbackProgression::Continue;
+                }
+                match clock.drain_latest() {
+                    Ok(Some(c)) => latest_clock = Some(c),
+                    Ok(None) => {}
+                    Err(e) => {
+                        failure = Some(e);
+                        return CallbackProgression::Stop;
+                    }
+                }
+                let Some(c) = latest_clock else {
+                    return CallbackProgression::Continue;
+                };
+                let sim = c.header.sim_time_ns;
+                let wake_mono_ns = mono_ns();
+                let ctx = StepContext {
+                    sim_time_ns: sim,
+                    tick: c.tick,
+                    wake_mono_ns,
+                    since_last_ns: last_sim.map_or(0, |l| sim.saturating_sub(l)),
+                    last: c.last != 0,
+                    mode: Mode::Lockstep,
+                };
+                last_sim = Some(sim);
+                if let Err(source) = task.step(&ctx) {
+                    failure = Some(RuntimeError::Task {
+                        sim_time_s: ctx.sim_time_s(),
+                        source,
+                    });
                     return CallbackProgression::Stop;
                 }
+                report.steps += 1;
+                stats.after_step(&ctx, mono_ns().saturating_sub(wake_mono_ns), report);
+                if let Err(e) = done.notify() {
+                    failure = Some(RuntimeError::Io {
+                        service: "done".into(),
+                        reason: format!("{e:?}"),
+                    });
+                    return CallbackProgression::Stop;
+                }
+                if spin_ns > 0 {
+                    spin_until = mono_ns() + spin_ns;
+                }
             }
-            let Some(c) = latest_clock else {
-                return CallbackProgression::Continue;
-            };
-            let sim = c.header.sim_time_ns;
-            let ctx = StepContext {
-                sim_time_ns: sim,
-                tick: c.tick,
-                wake_mono_ns: mono_ns(),
-                since_last_ns: last_sim.map_or(0, |l| sim.saturating_sub(l)),
-                last: c.last != 0,
-                mode: Mode::Lockstep,
-            };
-            last_sim = Some(sim);
-            if let Err(source) = task.step(&ctx) {
-                failure = Some(RuntimeError::Task {
-                    sim_time_s: ctx.sim_time_s(),
-                    source,
-                });
-                return CallbackProgression::Stop;
-            }
-            report.steps += 1;
-            if let Err(e) = done.notify() {
-                failure = Some(RuntimeError::Io {
-                    service: "done".into(),
-                    reason: format!("{e:?}"),
-                });
-                return CallbackProgression::Stop;
-            }
-            CallbackProgression::Continue
         };
         let result = waitset.wait_and_process(on_event);
         let finish = task.finish();
@@ -403,77 +440,79 @@ impl Runtime {
             sim_time_s: last_sim.unwrap_or(0) as f64 * 1e-9,
             source,
         })?;
-        Ok(report)
+        Ok(())
     }
 
-    fn run_realtime<T: Task>(self, mut task: T) -> Result<RunReport, RuntimeError> {
+    /// Realtime: activation `k` of this process is due at
+    /// `epoch + phase + k·period` on the monotonic clock; the process sleeps
+    /// until then (`Node::wait`, which returns early on SIGINT/SIGTERM), steps
+    /// with the activation's nominal time as its simulation time, and counts
+    /// a deadline miss for every activation it could not start before the
+    /// next one was due (those are skipped, not run late in a burst).
+    fn run_realtime<T: Task>(
+        &self,
+        mut task: T,
+        stats: &mut stats::StatsReporter,
+        report: &mut RunReport,
+    ) -> Result<(), RuntimeError> {
         let done = self.done_notifier()?;
         done.notify().map_err(|e| RuntimeError::Io {
             service: "done".into(),
             reason: format!("{e:?}"),
         })?;
-        let period = Duration::from_secs_f64(self.args.period_s.max(1e-4));
-        let period_ns = period.as_nanos() as u64;
+        let period_ns = (self.args.period_s.max(1e-4) * 1e9).round() as u64;
+        let phase_ns = (self.args.phase_s.max(0.0) * 1e9).round() as u64;
         let epoch = if self.args.epoch_mono_ns == 0 {
             mono_ns()
         } else {
             self.args.epoch_mono_ns
         };
-        let waitset = WaitSetBuilder::new()
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<ipc::Service>()
-            .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
-        let guard = waitset
-            .attach_interval(period)
-            .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
-        let mut report = RunReport::default();
-        let mut failure: Option<RuntimeError> = None;
-        let mut last_wake: Option<u64> = None;
-        let mut tick = 0u64;
-        let on_event = |id: WaitSetAttachmentId<ipc::Service>| {
-            if !id.has_event_from(&guard) {
-                return CallbackProgression::Continue;
-            }
+        let mut k = 0u64;
+        let mut last_sim: Option<u64> = None;
+        loop {
+            let due = epoch + phase_ns + k * period_ns;
             let now = mono_ns();
-            if now < epoch {
-                return CallbackProgression::Continue;
-            }
-            if let Some(prev) = last_wake {
-                if now.saturating_sub(prev) > 2 * period_ns {
-                    report.deadline_misses += 1;
+            if now < due {
+                match self.node.wait(Duration::from_nanos(due - now)) {
+                    Ok(()) => {}
+                    Err(iceoryx2::node::NodeWaitFailure::TerminationRequest) => break,
+                    // Another signal cut the sleep short: sleep again.
+                    Err(_) => {}
                 }
+                continue;
             }
+            let late = now - due;
+            let skipped = late / period_ns;
+            if skipped > 0 {
+                report.deadline_misses += skipped;
+                k += skipped;
+            }
+            let sim = k * period_ns + phase_ns;
+            stats.wake_late(now - (epoch + sim));
             let ctx = StepContext {
-                sim_time_ns: now - epoch,
-                tick,
+                sim_time_ns: sim,
+                tick: k,
                 wake_mono_ns: now,
-                since_last_ns: last_wake.map_or(0, |l| now.saturating_sub(l)),
+                since_last_ns: last_sim.map_or(0, |l| sim.saturating_sub(l)),
                 last: false,
                 mode: Mode::Realtime,
             };
-            last_wake = Some(now);
-            tick += 1;
+            last_sim = Some(sim);
+            k += 1;
             if let Err(source) = task.step(&ctx) {
-                failure = Some(RuntimeError::Task {
+                let _ = task.finish();
+                return Err(RuntimeError::Task {
                     sim_time_s: ctx.sim_time_s(),
                     source,
                 });
-                return CallbackProgression::Stop;
             }
             report.steps += 1;
-            CallbackProgression::Continue
-        };
-        let result = waitset.wait_and_process(on_event);
-        let finish = task.finish();
-        if let Some(e) = failure {
-            return Err(e);
+            stats.after_step(&ctx, mono_ns().saturating_sub(now), report);
         }
-        result.map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
-        finish.map_err(|source| RuntimeError::Task {
-            sim_time_s: 0.0,
+        task.finish().map_err(|source| RuntimeError::Task {
+            sim_time_s: last_sim.unwrap_or(0) as f64 * 1e-9,
             source,
-        })?;
-        Ok(report)
+        })
     }
 }
 

@@ -2,7 +2,9 @@
 //! non-finite samples, subscribers that hold back samples of the current
 //! lockstep tick, count losses and rejected samples, and time every hop.
 
+use std::cell::RefCell;
 use std::collections::VecDeque;
+use std::rc::Rc;
 
 use iceoryx2::port::publisher::Publisher as IoxPublisher;
 use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
@@ -12,6 +14,54 @@ use ipc_types::{Header, Sample};
 use crate::domain::ChannelLimits;
 use crate::latency::LatencyRecorder;
 use crate::{mono_ns, service_name, Mode, RuntimeError, StepContext};
+
+/// What one process has taken on one input channel kind (every subscription
+/// of that kind merged): publish → take latency, losses, rejections.
+#[derive(Debug, Clone, Default)]
+pub struct HopEntry {
+    /// Channel kind: the last segment of the service name (`truth`, `world`, ...).
+    pub kind: String,
+    /// Publish → take latency, ns.
+    pub latency: LatencyRecorder,
+    /// Samples that never arrived.
+    pub lost: u64,
+    /// Samples refused for a non-finite value.
+    pub rejected: u64,
+}
+
+thread_local! {
+    /// This process's hop statistics, one entry per input channel kind. A
+    /// shoal process runs its task on one thread, so the subscribers and the
+    /// runtime loop that reports them share these without locking; recording
+    /// costs one `RefCell` flag and one histogram increment.
+    static HOPS: RefCell<Vec<Rc<RefCell<HopEntry>>>> = const { RefCell::new(Vec::new()) };
+}
+
+/// The hop statistics entry of a channel kind (created on first use).
+fn hop_entry(kind: &str) -> Rc<RefCell<HopEntry>> {
+    HOPS.with(|h| {
+        let mut h = h.borrow_mut();
+        if let Some(e) = h.iter().find(|e| e.borrow().kind == kind) {
+            return Rc::clone(e);
+        }
+        let e = Rc::new(RefCell::new(HopEntry {
+            kind: kind.to_string(),
+            ..Default::default()
+        }));
+        h.push(Rc::clone(&e));
+        e
+    })
+}
+
+/// A copy of this thread's hop statistics, in the order the kinds were first subscribed.
+pub fn hop_snapshot() -> Vec<HopEntry> {
+    HOPS.with(|h| h.borrow().iter().map(|e| e.borrow().clone()).collect())
+}
+
+/// The channel kind of a service name: its last `/`-separated segment.
+pub fn channel_kind(service: &str) -> &str {
+    service.rsplit('/').next().unwrap_or(service)
+}
 
 /// Where a sample's causal chain started: the sensor event it descends from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -147,10 +197,12 @@ pub struct Subscriber<T: Sample> {
     service: String,
     mode: Mode,
     held: VecDeque<T>,
-    next_seq: Option<u64>,
+    /// Next expected sequence number of each publisher (a service may have
+    /// several: the stats channel, a restarted process).
+    next_seq: Vec<(u128, u64)>,
     lost: u64,
     rejected: u64,
-    latency: LatencyRecorder,
+    hops: Rc<RefCell<HopEntry>>,
 }
 
 impl<T: Sample> Subscriber<T> {
@@ -175,10 +227,10 @@ impl<T: Sample> Subscriber<T> {
             service: service.to_string(),
             mode,
             held: VecDeque::with_capacity(2 * limits.max_buffer),
-            next_seq: None,
+            next_seq: Vec::new(),
             lost: 0,
             rejected: 0,
-            latency: LatencyRecorder::new(),
+            hops: hop_entry(channel_kind(service)),
         })
     }
 
@@ -197,9 +249,10 @@ impl<T: Sample> Subscriber<T> {
         self.rejected
     }
 
-    /// Publish → take latency of every sample received so far.
-    pub fn latency(&self) -> &LatencyRecorder {
-        &self.latency
+    /// Publish → take latency of every sample of this channel kind this
+    /// process received so far (all its subscriptions of the kind merged).
+    pub fn latency(&self) -> crate::latency::LatencySummary {
+        self.hops.borrow().latency.summary()
     }
 
     fn pull(&mut self) -> Result<(), RuntimeError> {
@@ -212,17 +265,26 @@ impl<T: Sample> Subscriber<T> {
                 return Ok(());
             };
             let value: T = *sample;
+            let publisher = sample.header().publisher_id().value();
             drop(sample);
             let h = *value.header();
-            self.latency
-                .record_ns(mono_ns().saturating_sub(h.publish_mono_ns));
-            match self.next_seq {
-                Some(n) if h.seq > n => self.lost += h.seq - n,
-                _ => {}
+            let taken = mono_ns();
+            let mut hops = self.hops.borrow_mut();
+            hops.latency
+                .record_ns(taken.saturating_sub(h.publish_mono_ns));
+            match self.next_seq.iter_mut().find(|(p, _)| *p == publisher) {
+                Some((_, n)) => {
+                    if h.seq > *n {
+                        self.lost += h.seq - *n;
+                        hops.lost += h.seq - *n;
+                    }
+                    *n = h.seq + 1;
+                }
+                None => self.next_seq.push((publisher, h.seq + 1)),
             }
-            self.next_seq = Some(h.seq + 1);
             if !value.is_finite() {
                 self.rejected += 1;
+                hops.rejected += 1;
                 tracing::warn!(service = %self.service, seq = h.seq, "rejected a sample with a non-finite value");
                 continue;
             }

@@ -1,0 +1,201 @@
+//! Runtime statistics of one process: step durations, realtime wake-up
+//! lateness and deadline misses, and the publish → take latency of every
+//! input channel kind. Published about once a second on the run's `stats`
+//! channel (so the recording holds them) and written to a file at exit (so
+//! the orchestrator can merge the full histograms into `summary.json`).
+
+use std::path::{Path, PathBuf};
+
+use iceoryx2::prelude::*;
+use ipc_types::{fixed_str, HopStats, ProcessStats, RunChannel, Sample, MAX_HOPS};
+use serde::{Deserialize, Serialize};
+
+use crate::latency::LatencyRecorder;
+use crate::ports::{hop_snapshot, Origin};
+use crate::{domain, ChannelLimits, Publisher, RunArgs, RunReport, StepContext};
+
+/// Interval between two published statistics samples, ns (simulated time in
+/// lockstep, wall time in realtime).
+const PUBLISH_EVERY_NS: u64 = 1_000_000_000;
+
+/// One input channel kind in the exit file.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct HopFile {
+    /// Channel kind (`truth`, `world`, `clock`, ...).
+    pub kind: String,
+    /// Samples lost.
+    pub lost: u64,
+    /// Samples rejected (non-finite).
+    pub rejected: u64,
+    /// Publish → take latency histogram, `(ns, count)` buckets.
+    pub latency_ns: Vec<(u64, u64)>,
+}
+
+/// What a process leaves in `<domain root>/stats/<vehicle>.<process>.json` at exit.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct StatsFile {
+    /// Vehicle.
+    pub vehicle: String,
+    /// Process kind.
+    pub process: String,
+    /// Steps taken.
+    pub steps: u64,
+    /// Realtime deadline misses.
+    pub deadline_misses: u64,
+    /// Step duration histogram, `(ns, count)` buckets.
+    pub step_ns: Vec<(u64, u64)>,
+    /// Realtime wake-up lateness histogram, `(ns, count)` buckets.
+    pub wake_late_ns: Vec<(u64, u64)>,
+    /// Every input channel kind.
+    pub hops: Vec<HopFile>,
+}
+
+/// Where a run's processes leave their statistics files.
+pub fn stats_dir(run_id: &str) -> PathBuf {
+    domain::domain_root(run_id).join("stats")
+}
+
+/// Reads every statistics file of a run (unreadable ones are skipped with a warning).
+pub fn read_stats_files(run_id: &str) -> Vec<StatsFile> {
+    let mut out = Vec::new();
+    let Ok(entries) = std::fs::read_dir(stats_dir(run_id)) else {
+        return out;
+    };
+    for e in entries.flatten() {
+        let path = e.path();
+        match std::fs::read(&path)
+            .map_err(|e| e.to_string())
+            .and_then(|b| serde_json::from_slice(&b).map_err(|e| e.to_string()))
+        {
+            Ok(f) => out.push(f),
+            Err(err) => tracing::warn!(path = %path.display(), %err, "unreadable stats file"),
+        }
+    }
+    out.sort_by(|a: &StatsFile, b| (&a.vehicle, &a.process).cmp(&(&b.vehicle, &b.process)));
+    out
+}
+
+/// Limits of the run's `stats` channel: every process publishes, the
+/// recorder (and outside clients) read.
+pub fn stats_limits(processes: usize) -> ChannelLimits {
+    ChannelLimits {
+        max_publishers: processes + 2,
+        max_subscribers: 1 + domain::SPARE_SUBSCRIBERS,
+        max_nodes: processes + 2 + domain::SPARE_SUBSCRIBERS,
+        max_buffer: 4,
+        history: 0,
+    }
+}
+
+/// Collects and reports one process's statistics.
+pub(crate) struct StatsReporter {
+    publisher: Option<Publisher<ProcessStats>>,
+    vehicle: String,
+    process: String,
+    run_id: String,
+    step: LatencyRecorder,
+    wake_late: LatencyRecorder,
+    next_ns: u64,
+}
+
+impl StatsReporter {
+    pub(crate) fn new(node: &Node<ipc::Service>, args: &RunArgs) -> Self {
+        let service = ipc_types::run_service_name(&args.run_id, RunChannel::Stats);
+        let publisher = Publisher::open(node, &service, &stats_limits(args.processes))
+            .map_err(
+                |e| tracing::warn!(%e, "no stats channel; statistics go to the exit file only"),
+            )
+            .ok();
+        Self {
+            publisher,
+            vehicle: args.vehicle.clone(),
+            process: args.process.clone(),
+            run_id: args.run_id.clone(),
+            step: LatencyRecorder::new(),
+            wake_late: LatencyRecorder::new(),
+            next_ns: PUBLISH_EVERY_NS,
+        }
+    }
+
+    /// Records one step; publishes the statistics when a second has passed.
+    pub(crate) fn after_step(&mut self, ctx: &StepContext, step_ns: u64, report: &RunReport) {
+        self.step.record_ns(step_ns);
+        if ctx.sim_time_ns >= self.next_ns {
+            self.next_ns = (ctx.sim_time_ns / PUBLISH_EVERY_NS + 1) * PUBLISH_EVERY_NS;
+            let sample = self.sample(report);
+            if let Some(p) = self.publisher.as_mut() {
+                if let Err(e) = p.publish(sample, ctx, Origin::default()) {
+                    tracing::debug!(%e, "stats not published");
+                }
+            }
+        }
+    }
+
+    /// Records how late a realtime activation woke, ns.
+    pub(crate) fn wake_late(&mut self, ns: u64) {
+        self.wake_late.record_ns(ns);
+    }
+
+    fn sample(&self, report: &RunReport) -> ProcessStats {
+        let mut s = ProcessStats::zeroed();
+        s.vehicle = fixed_str(&self.vehicle);
+        s.process = fixed_str(&self.process);
+        s.steps = report.steps;
+        s.deadline_misses = report.deadline_misses;
+        s.step_p50_ns = self.step.quantile_ns(0.5);
+        s.step_p99_ns = self.step.quantile_ns(0.99);
+        s.step_max_ns = self.step.max_ns();
+        s.wake_late_p99_ns = self.wake_late.quantile_ns(0.99);
+        let hops = hop_snapshot();
+        s.hop_count = hops.len().min(MAX_HOPS) as u64;
+        for (slot, h) in s.hops.iter_mut().zip(&hops) {
+            s.lost += h.lost;
+            s.rejected += h.rejected;
+            *slot = HopStats {
+                channel: fixed_str(&h.kind),
+                count: h.latency.count(),
+                p50_ns: h.latency.quantile_ns(0.5),
+                p99_ns: h.latency.quantile_ns(0.99),
+                p999_ns: h.latency.quantile_ns(0.999),
+                max_ns: h.latency.max_ns(),
+            };
+        }
+        s
+    }
+
+    /// Writes the exit file.
+    pub(crate) fn write_file(&self, report: &RunReport) -> std::io::Result<PathBuf> {
+        let file = StatsFile {
+            vehicle: self.vehicle.clone(),
+            process: self.process.clone(),
+            steps: report.steps,
+            deadline_misses: report.deadline_misses,
+            step_ns: self.step.buckets(),
+            wake_late_ns: self.wake_late.buckets(),
+            hops: hop_snapshot()
+                .into_iter()
+                .map(|h| HopFile {
+                    kind: h.kind,
+                    lost: h.lost,
+                    rejected: h.rejected,
+                    latency_ns: h.latency.buckets(),
+                })
+                .collect(),
+        };
+        let dir = stats_dir(&self.run_id);
+        std::fs::create_dir_all(&dir)?;
+        let path = dir.join(format!("{}.{}.json", self.vehicle, self.process));
+        write_atomically(
+            &path,
+            &serde_json::to_vec(&file).map_err(std::io::Error::other)?,
+        )?;
+        Ok(path)
+    }
+}
+
+/// Writes `bytes` to a temporary file beside `path`, then renames it.
+fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = path.with_extension("json.tmp");
+    std::fs::write(&tmp, bytes)?;
+    std::fs::rename(&tmp, path)
+}
