@@ -18,7 +18,7 @@ use crate::payload::{Payload, Raw256, Raw4K};
 use crate::{dbg, raw_config, BenchError, PeerConfig};
 
 /// Batches per figure; the fastest counts.
-const REPEATS: usize = 7;
+const REPEATS: usize = 25;
 
 /// Per-call costs of shoal's per-sample steps for one sample size, ns.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -47,6 +47,12 @@ pub struct CostReport {
     pub hop_raw_shoal_limits_ns: f64,
     /// shoal `Publisher::publish`, then `Subscriber::take_ready`, one process.
     pub hop_shoal_ns: f64,
+    /// shoal's port steps replicated here on raw ports with the same
+    /// settings (stamp, check, send by copy; receive, copy out, latency,
+    /// sequence, check, hold queue), but with the finite check written out
+    /// per type instead of walking the schema: what the hop would cost with
+    /// that fix.
+    pub hop_shoal_fixed_ns: f64,
 }
 
 fn best_of(batch: usize, mut f: impl FnMut()) -> f64 {
@@ -74,8 +80,8 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
     cfg: &PeerConfig,
 ) -> Result<CostReport, BenchError> {
     let sample = S::make(3);
-    let small = 20_000;
-    let finite_batch = if S::SIZE > 1024 { 500 } else { 5_000 };
+    let small = 5_000;
+    let finite_batch = if S::SIZE > 1024 { 200 } else { 2_000 };
     let is_finite_ns = best_of(finite_batch, || {
         black_box(black_box(&sample).is_finite());
     });
@@ -98,7 +104,7 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
         let c: S = *black_box(&sample);
         black_box(c);
     });
-    let hops = 5_000;
+    let hops = 1_000;
 
     // Raw iceoryx2, one process: iceoryx2's default service settings, then
     // the settings shoal's ports ask for (a per-vehicle channel's limits).
@@ -146,6 +152,7 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
     if let Some(e) = sfailure {
         return Err(e);
     }
+    let hop_shoal_fixed_ns = replica_hop::<S>(&node, cfg, &sample, hops)?;
     Ok(CostReport {
         size: S::SIZE,
         is_finite_ns,
@@ -157,6 +164,7 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
         hop_raw_ns,
         hop_raw_shoal_limits_ns,
         hop_shoal_ns,
+        hop_shoal_fixed_ns,
     })
 }
 
@@ -218,6 +226,98 @@ fn raw_hop<R: Payload + ZeroCopySend>(
             });
         }
     });
+    match failure {
+        Some(e) => Err(e),
+        None => Ok(ns),
+    }
+}
+
+/// shoal's publish → take steps on raw ports (see
+/// [`CostReport::hop_shoal_fixed_ns`]), ns per hop.
+fn replica_hop<S: Sample + Payload>(
+    node: &Node<ipc::Service>,
+    cfg: &PeerConfig,
+    sample: &S,
+    hops: usize,
+) -> Result<f64, BenchError> {
+    let l = ChannelLimits::vehicle();
+    let name = bench_service_name(&cfg.run_id, "costs-replica", cfg.size, BenchDirection::Ping);
+    let service_name =
+        ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+    let service = node
+        .service_builder(&service_name)
+        .publish_subscribe::<S>()
+        .max_publishers(l.max_publishers)
+        .max_subscribers(l.max_subscribers)
+        .max_nodes(l.max_nodes)
+        .subscriber_max_buffer_size(l.max_buffer)
+        .history_size(l.history)
+        .subscriber_max_borrowed_samples(2)
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+    let tx = service
+        .publisher_builder()
+        .max_loaned_samples(2)
+        .create()
+        .map_err(|e| BenchError::setup("a replica publisher")(dbg(e)))?;
+    let rx = service
+        .subscriber_builder()
+        .buffer_size(2)
+        .create()
+        .map_err(|e| BenchError::setup("a replica subscriber")(dbg(e)))?;
+    let mut held: std::collections::VecDeque<S> = std::collections::VecDeque::with_capacity(32);
+    let mut latency = LatencyRecorder::new();
+    let mut seq = 0u64;
+    let mut next_seq: Option<u64> = None;
+    let mut lost = 0u64;
+    let mut failure: Option<BenchError> = None;
+    let ns = best_of(hops, || {
+        let mut step = || -> Result<(), String> {
+            // Publisher::publish
+            let mut out = *black_box(sample);
+            if !out.payload_is_finite() {
+                return Err("non-finite".into());
+            }
+            let origin = Origin::of(out.header());
+            let h = out.header_mut();
+            h.seq = seq;
+            h.sim_time_ns = 0;
+            h.origin_mono_ns = origin.mono_ns;
+            h.origin_sim_time_ns = origin.sim_time_ns;
+            h.publish_mono_ns = shoal_runtime::mono_ns();
+            tx.send_copy(out).map_err(dbg)?;
+            seq += 1;
+            // Subscriber::take_ready
+            while let Some(r) = rx.receive().map_err(dbg)? {
+                let v: S = *r;
+                drop(r);
+                let h = *v.header();
+                latency.record_ns(shoal_runtime::mono_ns().saturating_sub(h.publish_mono_ns));
+                if let Some(n) = next_seq {
+                    if h.seq > n {
+                        lost += h.seq - n;
+                    }
+                }
+                next_seq = Some(h.seq + 1);
+                if !v.payload_is_finite() {
+                    continue;
+                }
+                held.push_back(v);
+            }
+            while let Some(v) = held.pop_front() {
+                black_box(v);
+            }
+            Ok(())
+        };
+        if let Err(reason) = step() {
+            failure = Some(BenchError::Io {
+                what: "replica hop",
+                reason,
+            });
+        }
+    });
+    black_box(lost);
     match failure {
         Some(e) => Err(e),
         None => Ok(ns),
