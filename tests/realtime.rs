@@ -1,0 +1,182 @@
+//! Soft real time, measured: realtime runs report deadline misses, step
+//! times and per-hop latency (in summary.json and on the recorded `stats`
+//! channel), and a third-party client (the official `iceoryx2` Python
+//! package) reads a live run's channel.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::process::Stdio;
+use std::time::Duration;
+
+use recordings::Recording;
+use shoal_tests::*;
+
+fn python_with_iceoryx2() -> std::process::Command {
+    let mut py = python();
+    let ok = python()
+        .args(["-c", "import iceoryx2"])
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false);
+    assert!(
+        ok,
+        "the iceoryx2 Python package is required: pip install -r tests/requirements.txt"
+    );
+    py.arg(repo_root().join("tests/python/live_truth.py"));
+    py
+}
+
+#[test]
+fn a_python_iceoryx2_client_reads_truth_from_a_live_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = write_scenario(tmp.path(), "live.toml", &small_scenario("live", 12.0));
+    let out = tmp.path().join("live");
+    let mut run = shoal()
+        .args(["run", "--quiet", "--mode", "realtime", "--out"])
+        .arg(&out)
+        .arg(&scenario)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let client = python_with_iceoryx2()
+        .arg(&out)
+        .args(["F1", "--samples", "20", "--timeout", "11"])
+        .output()
+        .unwrap();
+    let status = run.wait().unwrap();
+    assert!(status.success(), "shoal run failed");
+    assert!(
+        client.status.success(),
+        "python client: {}\n{}",
+        String::from_utf8_lossy(&client.stdout),
+        String::from_utf8_lossy(&client.stderr)
+    );
+    let got: serde_json::Value = serde_json::from_slice(&client.stdout).unwrap();
+    let samples = got["samples"].as_array().unwrap();
+    assert!(samples.len() >= 20);
+    let run_id = wait_run_json(&out, Duration::from_secs(1))["run_id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert_eq!(got["service"], format!("shoal/{run_id}/F1/truth"));
+    let mut last: Option<(u64, u64)> = None;
+    for s in samples {
+        let seq = s["seq"].as_u64().unwrap();
+        let t = s["sim_time_ns"].as_u64().unwrap();
+        if let Some((ls, lt)) = last {
+            assert!(seq > ls && t > lt, "samples out of order: {s}");
+        }
+        last = Some((seq, t));
+        let q = s["q_norm"].as_f64().unwrap();
+        assert!(
+            (q - 1.0).abs() < 1e-9,
+            "attitude not a unit quaternion: {q}"
+        );
+        // F1 starts in its slot, 8 m behind and 4 m to port of L at 10 m depth,
+        // and moves at most ~1.5 m/s.
+        let p: Vec<f64> = s["position_ned_m"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        let reach = 2.0 + 1.5 * t as f64 * 1e-9;
+        assert!(
+            (p[0] + 8.0).abs() < reach && (p[1] + 4.0).abs() < reach && (p[2] - 10.0).abs() < 2.0,
+            "F1 is not where it should be: {p:?} at {t} ns"
+        );
+    }
+    assert!(shoal_runtime::list_domain_files(&run_id).is_empty());
+}
+
+#[test]
+fn a_realtime_run_reports_deadlines_steps_and_every_hop() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = write_scenario(tmp.path(), "rt.toml", &small_scenario("rt", 6.0));
+    let out = tmp.path().join("rt");
+    let o = run_shoal(&[
+        "run",
+        "--quiet",
+        "--mode",
+        "realtime",
+        "--out",
+        out.to_str().unwrap(),
+        scenario.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s["mode"], "realtime");
+    for kind in [
+        "sim-plant",
+        "world",
+        "camera-pose",
+        "sonar",
+        "planner",
+        "mpc",
+        "recorder",
+    ] {
+        assert!(
+            s["deadline_misses"][kind].is_u64(),
+            "no deadline misses for {kind}: {}",
+            s["deadline_misses"]
+        );
+        let steps = s["step_us"][kind]["count"].as_u64().unwrap_or(0);
+        assert!(steps >= 50, "{kind} stepped {steps} times in 6 s at 10 Hz");
+        assert!(s["wake_late_us"][kind]["count"].as_u64().unwrap_or(0) >= 50);
+    }
+    // Every channel kind a process takes has its hop latency; the chain
+    // sensor → thrust applied has its end-to-end latency.
+    for kind in [
+        "truth",
+        "world",
+        "nav",
+        "sonar",
+        "beacons",
+        "leader_pose",
+        "setpoint",
+        "thrust",
+        "stats",
+    ] {
+        let h = &s["latency_us"]["hops"][kind];
+        assert!(
+            h["count"].as_u64().unwrap_or(0) > 0,
+            "no hop latency for {kind}: {h}"
+        );
+        let (p50, p99, max) = (
+            h["p50"].as_f64().unwrap(),
+            h["p99"].as_f64().unwrap(),
+            h["max"].as_f64().unwrap(),
+        );
+        assert!(0.0 < p50 && p50 <= p99 && p99 <= max, "{kind}: {h}");
+    }
+    assert!(s["latency_us"]["end_to_end"]["count"].as_u64().unwrap() > 0);
+    // The same statistics are in the recording, on the stats channel.
+    let rec = Recording::open(&out.join("recording.mcap")).unwrap();
+    let stats = rec.samples::<ipc_types::ProcessStats>("/stats");
+    let processes = s["processes"].as_u64().unwrap() as usize;
+    let reporters: std::collections::BTreeSet<(String, String)> = stats
+        .iter()
+        .map(|p| {
+            (
+                ipc_types::str_of(&p.vehicle).to_string(),
+                ipc_types::str_of(&p.process).to_string(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        reporters.len(),
+        processes,
+        "every process reports: {reporters:?}"
+    );
+    let plant = stats
+        .iter()
+        .filter(|p| ipc_types::str_of(&p.process) == "sim-plant")
+        .max_by_key(|p| p.steps)
+        .unwrap();
+    let hops: Vec<&str> = plant.hops[..plant.hop_count as usize]
+        .iter()
+        .map(|h| ipc_types::str_of(&h.channel))
+        .collect();
+    assert!(hops.contains(&"thrust"), "sim-plant takes thrust: {hops:?}");
+}
