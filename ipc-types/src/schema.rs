@@ -201,8 +201,10 @@ pub fn cdr_size<T: Described>() -> usize {
 }
 
 /// Byte ranges of the fields of `T` that hold wall-clock readings (names
-/// ending in `mono_ns`, and `solve_ns`): the only bytes allowed to differ
-/// between two lockstep runs of the same scenario and seed.
+/// ending in `mono_ns`, and `solve_ns`; everything but the header of a
+/// `shoal/ProcessStats`, which measures the machine, not the simulation):
+/// the only bytes allowed to differ between two lockstep runs of the same
+/// scenario and seed.
 pub fn wall_clock_ranges<T: Described>() -> Vec<std::ops::Range<usize>> {
     fn walk(
         fields: &[FieldDesc],
@@ -234,6 +236,13 @@ pub fn wall_clock_ranges<T: Described>() -> Vec<std::ops::Range<usize>> {
     }
     let mut out = Vec::new();
     let mut off = 0;
-    walk(&T::fields(), &mut off, false, &mut out);
+    let fields = T::fields();
+    if T::ROS_NAME == "shoal/ProcessStats" {
+        let (header, rest) = fields.split_at(1.min(fields.len()));
+        walk(header, &mut off, false, &mut out);
+        walk(rest, &mut off, true, &mut out);
+    } else {
+        walk(&fields, &mut off, false, &mut out);
+    }
     out
 }

@@ -56,6 +56,7 @@ pub fn all_types() -> Vec<TypeInfo> {
         type_info::<PlannerState>(),
         type_info::<MpcStats>(),
         type_info::<Clock>(),
+        type_info::<ProcessStats>(),
     ]
 }
 
