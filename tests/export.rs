@@ -1,0 +1,218 @@
+//! `shoal export --foxglove`, end to end: a short real run of the small
+//! scenario with one obstacle of each kind is exported, and the exported
+//! MCAP is judged by a third-party check (PyPI `mcap` + Foxglove's own
+//! protobuf definitions + `jsonschema`, `tests/python/check_foxglove.py`)
+//! with no shoal code. The output is refused when it exists, unless --force.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+use recordings::Recording;
+use shoal_tests::*;
+
+/// The small scenario plus a box, a vertical cylinder, a sphere and a mesh.
+/// The sphere stands ahead of the leader, within sonar range from the start,
+/// so some beams echo.
+fn scenario_with_obstacles(duration_s: f64) -> String {
+    let mut s = small_scenario("export", duration_s);
+    s.push_str(
+        r#"
+[[obstacles]]
+kind = "box"
+center_ned_m = [30.0, -25.0, 10.0]
+half_extents_m = [5.0, 2.0, 8.0]
+yaw_deg = 30.0
+
+[[obstacles]]
+kind = "cylinder"
+center_ned_m = [40.0, 25.0, 10.0]
+radius_m = 2.0
+half_height_m = 10.0
+
+[[obstacles]]
+kind = "sphere"
+center_ned_m = [16.0, 6.0, 10.0]
+radius_m = 3.0
+
+[[obstacles]]
+kind = "mesh"
+vertices_ned_m = [[60.0, -30.0, 25.0], [60.0, 30.0, 25.0], [90.0, 0.0, 25.0]]
+triangles = [[0, 1, 2]]
+"#,
+    );
+    s
+}
+
+fn export(rec: &Path, out: &Path, force: bool) -> std::process::Output {
+    let mut args = vec![
+        "export",
+        rec.to_str().unwrap(),
+        "--foxglove",
+        out.to_str().unwrap(),
+    ];
+    if force {
+        args.push("--force");
+    }
+    run_shoal(&args)
+}
+
+fn strings(v: &serde_json::Value) -> BTreeSet<String> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_str().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn foxglove_export_passes_the_official_schemas_and_shows_every_part() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = write_scenario(tmp.path(), "export.toml", &scenario_with_obstacles(15.0));
+    let run_dir = tmp.path().join("run");
+    let o = run_shoal(&[
+        "run",
+        scenario.to_str().unwrap(),
+        "--quiet",
+        "--out",
+        run_dir.to_str().unwrap(),
+    ]);
+    assert!(
+        o.status.success(),
+        "shoal run failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let rec_path = run_dir.join("recording.mcap");
+    let rec = Recording::open(&rec_path).unwrap();
+    let truth_steps: BTreeSet<u64> = rec.topic_messages("/L/truth").map(|m| m.log_time).collect();
+    let n = |topics: &[&str]| -> u64 {
+        topics
+            .iter()
+            .map(|t| rec.topic_messages(t).count() as u64)
+            .sum()
+    };
+    let scans = n(&["/L/sonar", "/F1/sonar", "/F2/sonar"]);
+    let frames = n(&["/F1/beacons", "/F2/beacons"]);
+    let plans = n(&["/F1/planner_state", "/F2/planner_state"]);
+    assert!(truth_steps.len() > 100 && scans > 300 && frames > 200 && plans > 200);
+
+    let out = tmp.path().join("view.mcap");
+    let o = export(&rec_path, &out, false);
+    assert!(
+        o.status.success(),
+        "shoal export failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let summary = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(
+        summary.contains("/scene/line_of_sight") && summary.contains("foxglove.SceneUpdate"),
+        "{summary}"
+    );
+    assert!(!tmp.path().join("view.mcap.partial").exists());
+
+    let py = python()
+        .arg(repo_root().join("tests/python/check_foxglove.py"))
+        .arg("--self-test")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        py.status.success(),
+        "the exported file fails the official Foxglove schemas: {}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
+    let ch = &report["channels"];
+    let count = |topic: &str| ch[topic]["count"].as_u64().unwrap_or(0);
+    let schema = |topic: &str| ch[topic]["schema"].as_str().unwrap_or("").to_string();
+    let prims = |topic: &str, kind: &str| ch[topic]["primitives"][kind].as_u64().unwrap_or(0);
+
+    // Frames: one /tf per plant step, connecting every body and level frame to world.
+    assert_eq!(schema("/tf"), "foxglove.FrameTransforms");
+    assert_eq!(count("/tf"), truth_steps.len() as u64);
+    let want: BTreeSet<String> = ["world", "ned"]
+        .into_iter()
+        .map(String::from)
+        .chain(
+            ["L", "F1", "F2"]
+                .iter()
+                .flat_map(|v| [format!("{v}/body"), format!("{v}/level")]),
+        )
+        .collect();
+    assert_eq!(strings(&report["frames"]), want);
+
+    // Obstacles: one of each kind, once.
+    assert_eq!(count("/scene/obstacles"), 1);
+    assert_eq!(
+        strings(&ch["/scene/obstacles"]["entities"]).len(),
+        4,
+        "{}",
+        ch["/scene/obstacles"]
+    );
+    for kind in ["cubes", "cylinders", "spheres", "triangles"] {
+        assert_eq!(prims("/scene/obstacles", kind), 1, "{kind}");
+    }
+
+    // Vehicles: every one, with beacons on the parent only (L has 2 followers).
+    let vehicles: BTreeSet<String> = ["vehicle/L", "vehicle/F1", "vehicle/F2"]
+        .into_iter()
+        .map(String::from)
+        .collect();
+    assert_eq!(strings(&ch["/scene/vehicles"]["entities"]), vehicles);
+    assert_eq!(prims("/scene/vehicles", "arrows"), 3);
+    assert!(prims("/scene/vehicles", "spheres") >= 3);
+
+    // Slots and lines of sight per follower and recorded sample; sonar per scan.
+    assert_eq!(
+        strings(&ch["/scene/slots"]["entities"]),
+        BTreeSet::from(["slot/F1".to_string(), "slot/F2".to_string()])
+    );
+    assert_eq!(count("/scene/slots"), plans);
+    assert_eq!(
+        strings(&ch["/scene/line_of_sight"]["entities"]),
+        BTreeSet::from(["los/F1".to_string(), "los/F2".to_string()])
+    );
+    assert_eq!(count("/scene/line_of_sight"), frames);
+    assert_eq!(count("/scene/sonar"), scans);
+    assert!(
+        prims("/scene/sonar", "spheres") > 0,
+        "no sonar echo drawn though a sphere stands ahead: {}",
+        ch["/scene/sonar"]
+    );
+
+    // Poses: every truth sample; parent estimates only from valid fixes.
+    for v in ["L", "F1", "F2"] {
+        assert_eq!(schema(&format!("/{v}/pose")), "foxglove.PoseInFrame");
+        assert_eq!(
+            count(&format!("/{v}/pose")),
+            rec.topic_messages(&format!("/{v}/truth")).count() as u64
+        );
+    }
+    let valid = rec
+        .samples::<ipc_types::LeaderPose>("/F1/leader_pose")
+        .iter()
+        .filter(|s| s.valid == 1)
+        .count() as u64;
+    assert!(valid > 0);
+    assert_eq!(count("/F1/parent_estimate"), valid);
+
+    // The checker has teeth: broken copies of each channel's first message are refused.
+    let n_channels = ch.as_object().unwrap().len() as u64;
+    assert!(report["self_test_refused"].as_u64().unwrap() >= 5 * n_channels);
+
+    // An existing output is refused and left alone; --force replaces it.
+    let before = std::fs::read(&out).unwrap();
+    std::fs::write(&out, b"keep me").unwrap();
+    let o = export(&rec_path, &out, false);
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("--force"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(std::fs::read(&out).unwrap(), b"keep me");
+    let o = export(&rec_path, &out, true);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The same recording exports to the same bytes.
+    assert_eq!(std::fs::read(&out).unwrap(), before);
+}
