@@ -73,8 +73,8 @@ pub struct IpcCmd {
     /// fresh processes.
     #[arg(long, default_value_t = 2)]
     pub passes: u64,
-    /// CPUs the pinger and the ponger are pinned to.
-    #[arg(long, value_delimiter = ',', num_args = 2, default_values_t = [0usize, 1])]
+    /// CPUs the pinger and the ponger are pinned to, e.g. `0,1`.
+    #[arg(long, value_delimiter = ',', default_values_t = [0usize, 1])]
     pub cpus: Vec<usize>,
     /// Let the scheduler place the peers (no pinning).
     #[arg(long)]
@@ -398,6 +398,9 @@ fn load_average() -> Option<f64> {
 pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
     if cmd.iterations == 0 || cmd.passes == 0 {
         bail!("--iterations and --passes must be at least 1");
+    }
+    if cmd.cpus.len() != 2 {
+        bail!("--cpus takes two CPUs: the pinger's and the ponger's, e.g. 0,1");
     }
     if let Some(s) = cmd.sizes.iter().find(|s| ![256, 4096].contains(*s)) {
         bail!("--sizes: {s} B is not a benchmark size (256, 4096)");

@@ -147,11 +147,11 @@ impl Case {
 /// What a peer process does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Role {
-    /// Sends pings, times round trips, prints a [`PeerReport`].
+    /// Sends pings, times round trips, prints its report as one JSON line.
     Ping,
     /// Echoes every ping until the stop sample.
     Pong,
-    /// Times shoal's per-sample steps in one process; prints a [`CostReport`].
+    /// Times shoal's per-sample steps in one process; prints them as one JSON line.
     Costs,
 }
 
