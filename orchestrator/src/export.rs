@@ -39,7 +39,7 @@ mod scene;
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
-use std::io::{BufWriter, IsTerminal};
+use std::io::{BufWriter, IsTerminal, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -107,8 +107,15 @@ pub fn run(cmd: ExportCmd) -> anyhow::Result<()> {
     };
     std::fs::rename(&partial, out)
         .with_context(|| format!("cannot move {} to {}", partial.display(), out.display()))?;
+    for n in &report.notes {
+        tracing::warn!("{n}");
+    }
     if !cmd.quiet {
-        report.print(out);
+        match report.print(out) {
+            // A closed pipe (`| head`) is the reader's choice, not an error.
+            Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => return Err(e.into()),
+            _ => {}
+        }
     }
     Ok(())
 }
@@ -143,22 +150,23 @@ impl ExportReport {
         self.channels.iter().map(|c| c.2).sum()
     }
 
-    fn print(&self, out: &Path) {
-        println!(
+    /// Prints the closing table on stdout.
+    fn print(&self, out: &Path) -> std::io::Result<()> {
+        let mut o = std::io::stdout().lock();
+        writeln!(
+            o,
             "{}: {} messages on {} channels, {:.1} s .. {:.1} s (sim time)",
             out.display(),
             self.messages(),
             self.channels.len(),
             self.span_ns.0 as f64 * 1e-9,
             self.span_ns.1 as f64 * 1e-9
-        );
-        println!("{:<26} {:<26} {:>8}", "topic", "schema", "messages");
+        )?;
+        writeln!(o, "{:<26} {:<26} {:>8}", "topic", "schema", "messages")?;
         for (topic, schema, n) in &self.channels {
-            println!("{topic:<26} {schema:<26} {n:>8}");
+            writeln!(o, "{topic:<26} {schema:<26} {n:>8}")?;
         }
-        for n in &self.notes {
-            println!("note: {n}");
-        }
+        Ok(())
     }
 }
 
@@ -680,4 +688,243 @@ fn progress_bar(progress: bool, len: u64) -> indicatif::ProgressBar {
         bar.set_style(style);
     }
     bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use ipc_types::Sample;
+    use recordings::{RecordingWriter, WriterOptions};
+    use serde_json::Value;
+
+    const SCENARIO: &str = r#"
+name = "unit"
+duration_s = 1.0
+[[vehicles]]
+name = "L"
+[[vehicles]]
+name = "F1"
+parent = "L"
+slot_m = [-8.0, -4.0, 0.0]
+[[obstacles]]
+kind = "sphere"
+center_ned_m = [30.0, 0.0, 10.0]
+radius_m = 2.0
+"#;
+
+    fn truth(t: u64, p: [f64; 3]) -> Truth {
+        let mut s = Truth::zeroed();
+        s.header.sim_time_ns = t;
+        s.header.origin_sim_time_ns = t;
+        s.position_ned_m = p;
+        s.q_body_to_ned_wxyz = [1.0, 0.0, 0.0, 0.0];
+        s
+    }
+
+    /// A two-vehicle recording: L at (10, 0, 10), F1 in its slot 8 m behind
+    /// and 4 m to port, both heading north; one camera frame, one planner
+    /// state, one sonar scan 40 ms later, as the lockstep pipeline stamps them.
+    fn write_recording(path: &Path, with_scenario: bool) {
+        let mut w = RecordingWriter::create(path, &WriterOptions::default()).unwrap();
+        if with_scenario {
+            let mut meta = BTreeMap::new();
+            meta.insert("scenario_toml".to_string(), SCENARIO.to_string());
+            w.metadata("shoal.run", meta).unwrap();
+        }
+        let lt = w.add_channel::<Truth>("/L/truth").unwrap();
+        let ft = w.add_channel::<Truth>("/F1/truth").unwrap();
+        let fb = w.add_channel::<Beacons>("/F1/beacons").unwrap();
+        let fp = w.add_channel::<PlannerState>("/F1/planner_state").unwrap();
+        let ls = w.add_channel::<Sonar>("/L/sonar").unwrap();
+        for k in 0..3u64 {
+            let t = k * 100_000_000;
+            w.write(lt, &truth(t, [10.0 + k as f64, 0.0, 10.0]))
+                .unwrap();
+            w.write(ft, &truth(t, [2.0 + k as f64, -4.0, 10.0]))
+                .unwrap();
+        }
+        let mut b = Beacons::zeroed();
+        b.header.sim_time_ns = 40_000_000;
+        b.count = 4;
+        b.visible = [1, 0, 1, 1, 0, 0, 0, 0];
+        w.write(fb, &b).unwrap();
+        let mut p = PlannerState::zeroed();
+        p.header.sim_time_ns = 60_000_000;
+        p.slot_nominal_m = [-8.0, -4.0, 0.0];
+        p.slot_filtered_m = [-8.0, -4.0, 0.0];
+        w.write(fp, &p).unwrap();
+        let mut s = Sonar::zeroed();
+        s.header.sim_time_ns = 40_000_000;
+        s.count = 1;
+        s.ranges_m[0] = 5.0;
+        s.valid[0] = 1;
+        w.write(ls, &s).unwrap();
+        w.finish().unwrap();
+    }
+
+    /// Exports and reads back: topic → messages as JSON, in log-time order.
+    fn export_of(with_scenario: bool) -> (ExportReport, BTreeMap<String, Vec<(u64, Value)>>) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rec.mcap");
+        write_recording(&path, with_scenario);
+        let rec = recordings::Recording::open(&path).unwrap();
+        let mut buf = std::io::Cursor::new(Vec::new());
+        let report = export_foxglove(&rec, &mut buf, false).unwrap();
+        let bytes = buf.into_inner();
+        let mut out: BTreeMap<String, Vec<(u64, Value)>> = BTreeMap::new();
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            assert_eq!(m.channel.message_encoding, "json");
+            let schema = m.channel.schema.as_ref().unwrap();
+            assert_eq!(schema.encoding, "jsonschema");
+            out.entry(m.channel.topic.clone())
+                .or_default()
+                .push((m.log_time, serde_json::from_slice(&m.data).unwrap()));
+        }
+        (report, out)
+    }
+
+    fn xyz(v: &Value) -> [f64; 3] {
+        [
+            v["x"].as_f64().unwrap(),
+            v["y"].as_f64().unwrap(),
+            v["z"].as_f64().unwrap(),
+        ]
+    }
+
+    #[test]
+    fn line_of_sight_runs_from_the_camera_to_the_parents_beacons_at_the_frame_time() {
+        let (report, out) = export_of(true);
+        assert!(report.notes.is_empty(), "{:?}", report.notes);
+        let (t, los) = &out["/scene/line_of_sight"][0];
+        assert_eq!(*t, 40_000_000);
+        let e = &los["entities"][0];
+        // The frame saw the world of t = 0 (origin_sim_time_ns = 0).
+        assert_eq!(e["timestamp"]["nsec"], 0);
+        let line = &e["lines"][0];
+        let pts: Vec<[f64; 3]> = line["points"].as_array().unwrap().iter().map(xyz).collect();
+        assert_eq!(pts.len(), 8);
+        // Camera 1.4 m ahead of F1 at (2, -4, 10); beacon 0 is 1.5 m behind L at (10, 0, 10).
+        assert_eq!(pts[0], [3.4, -4.0, 10.0]);
+        assert_eq!(pts[1], [8.5, 0.0, 10.0]);
+        // Beacon 1 (1 m behind, 0.4 m up) was not seen: red; beacon 2 was: green.
+        assert_eq!(pts[3], [9.0, 0.0, 9.6]);
+        let colour = |i: usize| line["colors"][i]["g"].as_f64().unwrap() > 0.5;
+        assert!(colour(1) && !colour(3) && colour(5) && colour(7));
+    }
+
+    #[test]
+    fn slots_sonar_and_frames_come_from_the_recorded_samples() {
+        let (report, out) = export_of(true);
+        let topics: Vec<&str> = report.channels.iter().map(|c| c.0.as_str()).collect();
+        for t in [
+            "/scene/obstacles",
+            "/scene/vehicles",
+            "/tf",
+            "/L/pose",
+            "/F1/pose",
+            "/scene/slots",
+            "/scene/sonar",
+            "/scene/line_of_sight",
+        ] {
+            assert!(topics.contains(&t), "{t} missing from {topics:?}");
+        }
+        assert_eq!(
+            report.messages(),
+            out.values().map(|v| v.len() as u64).sum::<u64>()
+        );
+        // One /tf per truth time, each with world→ned and both vehicles' body and level frames.
+        let tf = &out["/tf"];
+        assert_eq!(tf.len(), 3);
+        assert_eq!(tf[2].0, 200_000_000);
+        let children: Vec<&str> = tf[2].1["transforms"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|t| t["child_frame_id"].as_str().unwrap())
+            .collect();
+        assert_eq!(
+            children,
+            ["ned", "L/body", "L/level", "F1/body", "F1/level"]
+        );
+        assert_eq!(
+            xyz(&tf[2].1["transforms"][1]["translation"]),
+            [12.0, 0.0, 10.0]
+        );
+        // The slot: F1 is exactly in it, seen from L's level frame at t = 60 ms (truth of t = 0).
+        let slot = &out["/scene/slots"][0].1["entities"][0];
+        assert_eq!(slot["frame_id"], "L/level");
+        let err = slot["metadata"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|k| k["key"] == "slot_error_m")
+            .unwrap();
+        assert_eq!(err["value"], "0.000");
+        let end = xyz(&slot["lines"][0]["points"][1]);
+        assert_relative_eq!(end[0], -8.0);
+        assert_relative_eq!(end[1], -4.0);
+        // Sonar: one beam straight ahead from the 0.8 m mount to the 5 m echo.
+        let sonar = &out["/scene/sonar"][0].1["entities"][0];
+        assert_eq!(sonar["frame_id"], "L/body");
+        assert_eq!(xyz(&sonar["lines"][0]["points"][1]), [5.8, 0.0, 0.0]);
+        // The sphere obstacle, in ned.
+        let ob = &out["/scene/obstacles"][0].1["entities"][0];
+        assert_eq!(ob["frame_id"], "ned");
+        assert_eq!(xyz(&ob["spheres"][0]["size"]), [4.0, 4.0, 4.0]);
+    }
+
+    #[test]
+    fn without_a_scenario_the_frames_vehicles_and_poses_are_still_written() {
+        let (report, out) = export_of(false);
+        assert!(
+            report.notes.iter().any(|n| n.contains("no scenario")),
+            "{:?}",
+            report.notes
+        );
+        assert!(
+            out.contains_key("/tf")
+                && out.contains_key("/scene/vehicles")
+                && out.contains_key("/scene/sonar")
+        );
+        assert!(!out.contains_key("/scene/slots") && !out.contains_key("/scene/line_of_sight"));
+        let ids: Vec<&str> = out["/scene/vehicles"][0].1["entities"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| e["id"].as_str().unwrap())
+            .collect();
+        // Recording (channel) order.
+        assert_eq!(ids, ["vehicle/L", "vehicle/F1"]);
+    }
+
+    #[test]
+    fn the_output_is_refused_when_it_exists_and_never_the_input() {
+        let dir = tempfile::tempdir().unwrap();
+        let rec = dir.path().join("rec.mcap");
+        write_recording(&rec, true);
+        let out = dir.path().join("view.mcap");
+        std::fs::write(&out, b"old").unwrap();
+        let cmd = |force| ExportCmd {
+            recording: rec.clone(),
+            foxglove: out.clone(),
+            force,
+            quiet: true,
+        };
+        let e = run(cmd(false)).unwrap_err();
+        assert!(e.to_string().contains("--force"), "{e}");
+        assert_eq!(std::fs::read(&out).unwrap(), b"old");
+        run(cmd(true)).unwrap();
+        assert_ne!(std::fs::read(&out).unwrap(), b"old");
+        assert!(!partial_path(&out).exists());
+        let e = run(ExportCmd {
+            recording: rec.clone(),
+            foxglove: rec.clone(),
+            force: true,
+            quiet: true,
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("input recording"), "{e}");
+    }
 }
