@@ -99,6 +99,8 @@ struct Stats {
     case: String,
     size: usize,
     count: usize,
+    /// Involuntary context switches of both peers during the timed rounds.
+    preempted: Option<u64>,
     p50: f64,
     p99: f64,
     p999: f64,
@@ -108,7 +110,7 @@ struct Stats {
 
 impl Stats {
     /// Nearest-rank percentiles of round trips given in ns.
-    fn of(case: &str, size: usize, mut ns: Vec<u64>) -> Option<Self> {
+    fn of(case: &str, size: usize, mut ns: Vec<u64>, preempted: Option<u64>) -> Option<Self> {
         if ns.is_empty() {
             return None;
         }
@@ -122,6 +124,7 @@ impl Stats {
             case: case.to_string(),
             size,
             count: n,
+            preempted,
             p50: q(0.5),
             p99: q(0.99),
             p999: q(0.999),
@@ -133,7 +136,7 @@ impl Stats {
     fn to_json(&self) -> Value {
         json!({
             "case": self.case, "size": self.size, "wait": wait_of(&self.case),
-            "count": self.count, "p50_us": self.p50, "p99_us": self.p99,
+            "count": self.count, "preempted": self.preempted, "p50_us": self.p50, "p99_us": self.p99,
             "p999_us": self.p999, "max_us": self.max, "mean_us": self.mean,
         })
     }
@@ -298,17 +301,19 @@ impl Bench<'_> {
         ]
     }
 
-    /// Runs one pinger/ponger pair; returns the timed round trips, ns.
+    /// Runs one pinger/ponger pair; returns the timed round trips (ns) and
+    /// how often the kernel preempted either peer meanwhile.
     fn pair(
         &self,
         case: &str,
         size: usize,
         iterations: u64,
         pass: u64,
-    ) -> anyhow::Result<Vec<u64>> {
+    ) -> anyhow::Result<(Vec<u64>, Option<u64>)> {
         let tag = format!("{case}-{size}-{pass}");
         let samples = self.work.join(format!("{tag}.rtt"));
         let report = self.work.join(format!("{tag}.json"));
+        let pong_report = self.work.join(format!("{tag}.pong.json"));
         let mut peers = Peers::default();
         for (role, cpu) in [("pong", 1), ("ping", 0)] {
             let mut args = self.common_args(role, case, size);
@@ -323,16 +328,16 @@ impl Bench<'_> {
             }
             let stdout = if role == "ping" {
                 args.extend(["--samples".into(), samples.display().to_string()]);
-                Some(report.as_path())
+                report.as_path()
             } else {
-                None
+                pong_report.as_path()
             };
             let log = self.work.join(format!("{tag}.{role}.log"));
             peers.spawn(
                 &format!("{case} {size} B {role}er"),
                 &self.bin,
                 &args,
-                stdout,
+                Some(stdout),
                 &log,
             )?;
         }
@@ -360,7 +365,14 @@ impl Bench<'_> {
                 rtts.len()
             );
         }
-        Ok(rtts)
+        let pong: Option<Value> = std::fs::read_to_string(&pong_report)
+            .ok()
+            .and_then(|t| serde_json::from_str(t.trim()).ok());
+        let preempted = r["preempted"]
+            .as_u64()
+            .zip(pong.and_then(|p| p["preempted"].as_u64()))
+            .map(|(a, b)| a + b);
+        Ok((rtts, preempted))
     }
 
     /// Runs the cost probe for one size.
@@ -451,6 +463,7 @@ pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
     let load_before = load_average();
     let start = Instant::now();
     let mut rtts: Vec<Vec<Vec<u64>>> = vec![vec![Vec::new(); cases.len()]; cmd.sizes.len()];
+    let mut preempted: Vec<Vec<Option<u64>>> = vec![vec![None; cases.len()]; cmd.sizes.len()];
     let total = cmd.passes as usize * cmd.sizes.len() * cases.len();
     let mut done = 0;
     let progress = std::io::IsTerminal::is_terminal(&std::io::stderr());
@@ -472,7 +485,12 @@ pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
                 let r = bench
                     .pair(cases[ci], size, per_pass, pass)
                     .with_context(|| format!("case {} {size} B", cases[ci]))?;
-                rtts[si][ci].extend(r);
+                rtts[si][ci].extend(r.0);
+                preempted[si][ci] = match (preempted[si][ci], r.1) {
+                    (Some(a), Some(b)) if pass > 0 => Some(a + b),
+                    (_, b) if pass == 0 => b,
+                    _ => None,
+                };
             }
         }
     }
@@ -493,7 +511,12 @@ pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
     let mut stats = Vec::new();
     for (si, &size) in cmd.sizes.iter().enumerate() {
         for (ci, case) in cases.iter().enumerate() {
-            if let Some(s) = Stats::of(case, size, std::mem::take(&mut rtts[si][ci])) {
+            if let Some(s) = Stats::of(
+                case,
+                size,
+                std::mem::take(&mut rtts[si][ci]),
+                preempted[si][ci],
+            ) {
                 stats.push(s);
             }
         }
@@ -601,7 +624,7 @@ fn print_report(
         )
     };
     println!(
-        "shoal bench ipc: ping-pong round trip, µs ({} timed round trips per case in {} passes of {} + {} warm-up; {pin}; load average {} -> {}; {wall_s:.1} s)",
+        "shoal bench ipc: ping-pong round trip, µs ({} timed round trips per case in {} passes of {} + {} warm-up; {pin}; load average {} -> {}; {wall_s:.1} s)\n(preempted: times the kernel took the CPU from either peer during the timed round trips)",
         per_pass * cmd.passes,
         cmd.passes,
         per_pass,
@@ -611,12 +634,12 @@ fn print_report(
     );
     println!();
     println!(
-        "{:>6}  {:<13} {:<6} {:>9} {:>9} {:>9} {:>9} {:>9}",
-        "size", "case", "wait", "p50", "p99", "p99.9", "max", "mean"
+        "{:>6}  {:<13} {:<6} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10}",
+        "size", "case", "wait", "p50", "p99", "p99.9", "max", "mean", "preempted"
     );
     for s in stats {
         println!(
-            "{:>6}  {:<13} {:<6} {:>9.2} {:>9.2} {:>9.2} {:>9.1} {:>9.2}",
+            "{:>6}  {:<13} {:<6} {:>9.2} {:>9.2} {:>9.2} {:>9.1} {:>9.2} {:>10}",
             format!("{} B", s.size),
             s.case,
             wait_of(&s.case),
@@ -624,7 +647,8 @@ fn print_report(
             s.p99,
             s.p999,
             s.max,
-            s.mean
+            s.mean,
+            s.preempted.map_or("?".to_string(), |p| p.to_string()),
         );
     }
     if !ratios.is_empty() {

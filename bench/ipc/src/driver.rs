@@ -5,7 +5,7 @@ use std::io::Write as _;
 use std::time::{Duration, Instant};
 
 use crate::payload::Payload;
-use crate::{BenchError, PeerConfig, PeerReport};
+use crate::{involuntary_switches, BenchError, PeerConfig, PeerReport, PongReport};
 
 /// Round number of the stop sample (echoed, then the ponger exits).
 pub(crate) const STOP: u64 = u64::MAX;
@@ -19,13 +19,26 @@ pub(crate) struct Served {
     pub echoed: u64,
     /// The stop sample was among them.
     pub stop: bool,
+    /// The highest round number among them (the stop's excluded).
+    pub last_round: u64,
 }
 
 impl Served {
+    /// Adds what another call served.
+    pub(crate) fn merge(&mut self, other: Served) {
+        self.echoed += other.echoed;
+        self.stop |= other.stop;
+        self.last_round = self.last_round.max(other.last_round);
+    }
+
     /// Accounts one echoed sample of `round`.
     pub(crate) fn add(&mut self, round: u64) {
         self.echoed += 1;
-        self.stop |= round == STOP;
+        if round == STOP {
+            self.stop = true;
+        } else {
+            self.last_round = self.last_round.max(round);
+        }
     }
 }
 
@@ -59,7 +72,11 @@ pub(crate) fn run_pinger<M: Payload>(
     let total = cfg.warmup + cfg.iterations;
     let mut rtts: Vec<u64> = Vec::with_capacity(cfg.iterations as usize);
     let mut verified = 0u64;
+    let mut switches_before = None;
     for round in 1..=total {
+        if round == cfg.warmup + 1 {
+            switches_before = involuntary_switches();
+        }
         let msg = M::make(round);
         let t0 = Instant::now();
         send(&msg)?;
@@ -79,6 +96,9 @@ pub(crate) fn run_pinger<M: Payload>(
             rtts.push(u64::try_from(rtt.as_nanos()).unwrap_or(u64::MAX));
         }
     }
+    let preempted = switches_before
+        .zip(involuntary_switches())
+        .map(|(a, b)| b.saturating_sub(a));
     send(&M::make(STOP))?;
     if wait(STOP, Some(timeout))?.is_none() {
         return Err(BenchError::Timeout {
@@ -89,19 +109,31 @@ pub(crate) fn run_pinger<M: Payload>(
     if let Some(path) = &cfg.samples {
         write_samples(path, &rtts)?;
     }
-    Ok(report(cfg, M::SIZE, verified, &rtts))
+    Ok(report(cfg, M::SIZE, verified, &rtts, preempted))
 }
 
 /// Runs the ponger side: `serve` waits (as its case waits) and echoes what
-/// arrived, until the stop sample. Returns the samples echoed before it.
+/// arrived, until the stop sample. `warmup` is the pinger's, so that
+/// preemptions are counted from the first timed round on.
 pub(crate) fn run_ponger(
+    warmup: u64,
     mut serve: impl FnMut() -> Result<Served, BenchError>,
-) -> Result<u64, BenchError> {
+) -> Result<PongReport, BenchError> {
     let mut echoed = 0u64;
+    let mut switches_before = None;
     loop {
         let s = serve()?;
+        if switches_before.is_none() && s.last_round > warmup {
+            switches_before = involuntary_switches();
+        }
         if s.stop {
-            return Ok(echoed + s.echoed - 1);
+            let preempted = switches_before
+                .zip(involuntary_switches())
+                .map(|(a, b)| b.saturating_sub(a));
+            return Ok(PongReport {
+                echoed: echoed + s.echoed - 1,
+                preempted,
+            });
         }
         echoed += s.echoed;
     }
@@ -119,7 +151,13 @@ fn write_samples(path: &std::path::Path, rtts: &[u64]) -> Result<(), BenchError>
     out.flush().map_err(io)
 }
 
-fn report(cfg: &PeerConfig, size: usize, verified: u64, rtts: &[u64]) -> PeerReport {
+fn report(
+    cfg: &PeerConfig,
+    size: usize,
+    verified: u64,
+    rtts: &[u64],
+    preempted: Option<u64>,
+) -> PeerReport {
     let mut hist = hdrhistogram::Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).ok();
     if let Some(h) = hist.as_mut() {
         for &r in rtts {
@@ -144,6 +182,7 @@ fn report(cfg: &PeerConfig, size: usize, verified: u64, rtts: &[u64]) -> PeerRep
         p99_ns: q(0.99),
         p999_ns: q(0.999),
         max_ns: rtts.iter().copied().max().unwrap_or(0),
+        preempted,
     }
 }
 
@@ -214,12 +253,12 @@ mod tests {
     #[test]
     fn ponger_stops_at_the_stop_sample_and_counts_the_rest() {
         let mut rounds = vec![0, 1, 2, STOP].into_iter();
-        let echoed = run_ponger(|| {
+        let report = run_ponger(1, || {
             let mut s = Served::default();
             s.add(rounds.next().unwrap());
             Ok(s)
         })
         .unwrap();
-        assert_eq!(echoed, 3);
+        assert_eq!(report.echoed, 3);
     }
 }

@@ -227,6 +227,19 @@ pub struct PeerReport {
     pub p999_ns: u64,
     /// Slowest, ns.
     pub max_ns: u64,
+    /// Times the kernel took the CPU from the pinger during the timed round
+    /// trips (involuntary context switches; `None` without `/proc`).
+    pub preempted: Option<u64>,
+}
+
+/// What the ponger reports.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PongReport {
+    /// Samples echoed (stop sample excluded).
+    pub echoed: u64,
+    /// Times the kernel took the CPU from the ponger from its first timed
+    /// round on (involuntary context switches; `None` without `/proc`).
+    pub preempted: Option<u64>,
 }
 
 /// What a peer process produced.
@@ -234,11 +247,8 @@ pub struct PeerReport {
 pub enum PeerOutput {
     /// The pinger's measurement.
     Ping(PeerReport),
-    /// The ponger's count of echoed samples (stop sample excluded).
-    Pong {
-        /// Samples echoed.
-        echoed: u64,
-    },
+    /// The ponger's report.
+    Pong(PongReport),
     /// The per-sample cost breakdown.
     Costs(CostReport),
 }
@@ -346,7 +356,7 @@ pub fn run_peer(cfg: &PeerConfig) -> Result<PeerOutput, BenchError> {
             Ok(PeerOutput::Ping(report))
         }
         Role::Pong => {
-            let echoed = match (cfg.case, cfg.size) {
+            let report = match (cfg.case, cfg.size) {
                 (Case::IoxPoll | Case::IoxEvent | Case::IoxWaitset, 256) => {
                     raw::pong::<Raw256>(cfg)
                 }
@@ -363,9 +373,20 @@ pub fn run_peer(cfg: &PeerConfig) -> Result<PeerOutput, BenchError> {
                 (Case::Uds, 4096) => uds::pong::<Raw4K>(cfg),
                 (_, s) => Err(BenchError::UnsupportedSize(s)),
             }?;
-            Ok(PeerOutput::Pong { echoed })
+            Ok(PeerOutput::Pong(report))
         }
     }
+}
+
+/// Involuntary context switches of this process so far (`/proc/self/status`).
+pub fn involuntary_switches() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("nonvoluntary_ctxt_switches:"))?
+        .trim()
+        .parse()
+        .ok()
 }
 
 fn pin_to(cpu: usize) -> Result<(), BenchError> {

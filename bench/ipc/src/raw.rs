@@ -14,7 +14,7 @@ use ipc_types::bench::{bench_event_name, bench_service_name, BenchDirection};
 use crate::driver::{run_pinger, run_ponger, Served};
 use crate::payload::Payload;
 use crate::wait::Backoff;
-use crate::{dbg, raw_config, BenchError, Case, PeerConfig, PeerReport};
+use crate::{dbg, raw_config, BenchError, Case, PeerConfig, PeerReport, PongReport};
 
 /// The ports of one raw peer.
 struct Ports<M: Payload + ZeroCopySend> {
@@ -253,11 +253,11 @@ pub(crate) fn ping<M: Payload + ZeroCopySend>(cfg: &PeerConfig) -> Result<PeerRe
 }
 
 /// The ponger of a raw case.
-pub(crate) fn pong<M: Payload + ZeroCopySend>(cfg: &PeerConfig) -> Result<u64, BenchError> {
+pub(crate) fn pong<M: Payload + ZeroCopySend>(cfg: &PeerConfig) -> Result<PongReport, BenchError> {
     let ports = open::<M>(cfg, false)?;
     let Ports { tx, rx, events, .. } = &ports;
     match (cfg.case, events) {
-        (Case::IoxEvent, Some((notifier, listener))) => run_ponger(|| {
+        (Case::IoxEvent, Some((notifier, listener))) => run_ponger(cfg.warmup, || {
             listener.blocking_wait(|_| {}).map_err(wait_error)?;
             let served = echo_all(rx, tx)?;
             if served.echoed > 0 {
@@ -273,7 +273,7 @@ pub(crate) fn pong<M: Payload + ZeroCopySend>(cfg: &PeerConfig) -> Result<u64, B
             let guard = waitset
                 .attach_notification(listener)
                 .map_err(|e| BenchError::setup("a wait set attachment")(dbg(e)))?;
-            run_ponger(|| {
+            run_ponger(cfg.warmup, || {
                 let mut served = Served::default();
                 let mut failure = None;
                 let on_event = |id: WaitSetAttachmentId<ipc::Service>| {
@@ -286,8 +286,7 @@ pub(crate) fn pong<M: Payload + ZeroCopySend>(cfg: &PeerConfig) -> Result<u64, B
                             Ok(s)
                         }) {
                             Ok(s) => {
-                                served.echoed += s.echoed;
-                                served.stop |= s.stop;
+                                served.merge(s);
                             }
                             Err(e) => {
                                 failure = Some(e);
@@ -309,7 +308,7 @@ pub(crate) fn pong<M: Payload + ZeroCopySend>(cfg: &PeerConfig) -> Result<u64, B
         }
         _ => {
             let timeout = cfg.timeout();
-            run_ponger(|| {
+            run_ponger(cfg.warmup, || {
                 let mut backoff = Backoff::new(timeout, "the next ping");
                 loop {
                     let served = echo_all(rx, tx)?;

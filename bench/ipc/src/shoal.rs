@@ -19,7 +19,7 @@ use shoal_runtime::{ChannelLimits, Mode, Publisher, StepContext, Subscriber};
 use crate::driver::{run_pinger, run_ponger, Served};
 use crate::payload::Payload;
 use crate::wait::Backoff;
-use crate::{dbg, BenchError, Case, PeerConfig, PeerReport};
+use crate::{dbg, BenchError, Case, PeerConfig, PeerReport, PongReport};
 
 /// Subscriber buffer of the bench channels (a service's usual depth).
 const BUFFER: usize = 2;
@@ -247,7 +247,7 @@ pub(crate) fn ping<S: Sample + Payload>(cfg: &PeerConfig) -> Result<PeerReport, 
 }
 
 /// The ponger of a shoal case.
-pub(crate) fn pong<S: Sample + Payload>(cfg: &PeerConfig) -> Result<u64, BenchError> {
+pub(crate) fn pong<S: Sample + Payload>(cfg: &PeerConfig) -> Result<PongReport, BenchError> {
     let mut ports = open::<S>(cfg, false)?;
     let Ports { tx, rx, events, .. } = &mut ports;
     match events {
@@ -257,7 +257,7 @@ pub(crate) fn pong<S: Sample + Payload>(cfg: &PeerConfig) -> Result<u64, BenchEr
                 .attach_notification(&*listener)
                 .map_err(|e| BenchError::setup("a wait set attachment")(dbg(e)))?;
             let mut tick = 0u64;
-            run_ponger(|| {
+            run_ponger(cfg.warmup, || {
                 let mut served = Served::default();
                 let mut failure = None;
                 // The body of the runtime's run loop: drain the wake event, build
@@ -281,8 +281,7 @@ pub(crate) fn pong<S: Sample + Payload>(cfg: &PeerConfig) -> Result<u64, BenchEr
                     });
                     match step {
                         Ok(s) => {
-                            served.echoed += s.echoed;
-                            served.stop |= s.stop;
+                            served.merge(s);
                             CallbackProgression::Continue
                         }
                         Err(e) => {
@@ -304,7 +303,7 @@ pub(crate) fn pong<S: Sample + Payload>(cfg: &PeerConfig) -> Result<u64, BenchEr
         None => {
             let timeout = cfg.timeout();
             let ctx = context(0);
-            run_ponger(|| {
+            run_ponger(cfg.warmup, || {
                 let mut backoff = Backoff::new(timeout, "the next ping");
                 loop {
                     let served = echo_all(rx, tx, &ctx)?;

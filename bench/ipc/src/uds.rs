@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use crate::driver::{run_pinger, run_ponger, Served};
 use crate::payload::Payload;
-use crate::{socket_path, BenchError, PeerConfig, PeerReport};
+use crate::{socket_path, BenchError, PeerConfig, PeerReport, PongReport};
 
 fn io_error(what: &'static str) -> impl Fn(std::io::Error) -> BenchError {
     move |e| match e.kind() {
@@ -69,7 +69,7 @@ pub(crate) fn ping<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<PeerR
 }
 
 /// The ponger: listens, accepts one connection, echoes until the stop.
-pub(crate) fn pong<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<u64, BenchError> {
+pub(crate) fn pong<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<PongReport, BenchError> {
     let path = socket_path(&cfg.run_id, cfg.size);
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir)
@@ -78,7 +78,7 @@ pub(crate) fn pong<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<u64, 
     let _ = std::fs::remove_file(&path);
     let listener = UnixListener::bind(&path)
         .map_err(|e| BenchError::setup(path.display().to_string())(e.to_string()))?;
-    let result = serve::<M>(&listener, cfg.timeout());
+    let result = serve::<M>(&listener, cfg.timeout(), cfg.warmup);
     let _ = std::fs::remove_file(&path);
     result
 }
@@ -86,7 +86,8 @@ pub(crate) fn pong<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<u64, 
 fn serve<M: Payload + bytemuck::Pod>(
     listener: &UnixListener,
     timeout: Duration,
-) -> Result<u64, BenchError> {
+    warmup: u64,
+) -> Result<PongReport, BenchError> {
     listener
         .set_nonblocking(true)
         .map_err(io_error("socket setup"))?;
@@ -112,7 +113,7 @@ fn serve<M: Payload + bytemuck::Pod>(
     stream
         .set_read_timeout(Some(timeout))
         .map_err(io_error("socket setup"))?;
-    run_ponger(|| {
+    run_ponger(warmup, || {
         let m: M = read_msg(&mut stream)?;
         stream
             .write_all(bytemuck::bytes_of(&m))

@@ -1,6 +1,6 @@
 //! `shoal-ipc-peer`: one peer of a `shoal bench ipc` case (see the
-//! `shoal_bench_ipc` crate). The pinger and the cost probe print one JSON
-//! line on stdout; errors go to stderr with a non-zero exit code.
+//! `shoal_bench_ipc` crate). Every role prints one JSON line on stdout;
+//! errors go to stderr with a non-zero exit code.
 
 use std::process::ExitCode;
 
@@ -13,10 +13,7 @@ fn main() -> ExitCode {
     let printed = match run_peer(&cfg) {
         Ok(PeerOutput::Ping(report)) => serde_json::to_string(&report),
         Ok(PeerOutput::Costs(costs)) => serde_json::to_string(&costs),
-        Ok(PeerOutput::Pong { echoed }) => {
-            tracing::debug!(echoed, "ponger done");
-            return ExitCode::SUCCESS;
-        }
+        Ok(PeerOutput::Pong(report)) => serde_json::to_string(&report),
         Err(e) => {
             eprintln!("shoal-ipc-peer {:?} {}: {e}", cfg.role, cfg.case.name());
             return ExitCode::FAILURE;
