@@ -55,6 +55,17 @@ use scene::{ScanView, SlotView, TruePose, VehicleLook};
 
 /// Arguments of `shoal export`.
 #[derive(Debug, clap::Args)]
+#[command(after_help = "\
+Channels written (Foxglove JSON, official schemas embedded):
+  /tf                    foxglove.FrameTransforms  world (ENU) -> ned -> <V>/body, <V>/level
+  /scene/obstacles       foxglove.SceneUpdate      scenario obstacles, in ned
+  /scene/vehicles        foxglove.SceneUpdate      hull, heading arrow, name, beacons
+  /scene/slots           foxglove.SceneUpdate      each follower's slot in its parent's level frame
+  /scene/sonar           foxglove.SceneUpdate      sonar beams, red to the echo
+  /scene/line_of_sight   foxglove.SceneUpdate      camera -> parent's beacons, green seen / red not
+  /<V>/pose              foxglove.PoseInFrame      true pose, in ned
+  /<F>/parent_estimate   foxglove.PoseInFrame      the parent as the camera estimated it
+Times are the recording's simulation time (the view starts at 1970-01-01 00:00:00).")]
 pub struct ExportCmd {
     /// The shoal recording (MCAP), e.g. runs/paper-<time>/recording.mcap.
     pub recording: PathBuf,
@@ -62,7 +73,7 @@ pub struct ExportCmd {
     /// beams and the camera's line of sight as foxglove.SceneUpdate,
     /// frames as foxglove.FrameTransforms, poses as foxglove.PoseInFrame
     /// (JSON). Open it in Foxglove and pick the `world` frame (ENU, z up).
-    #[arg(long)]
+    #[arg(long, value_name = "OUT")]
     pub foxglove: PathBuf,
     /// Replace OUT if it exists (it is refused otherwise).
     #[arg(long)]
