@@ -9,6 +9,7 @@ mod export;
 mod gen;
 mod plots;
 mod recover;
+mod replay;
 mod run;
 mod summary;
 mod supervisor;
@@ -58,6 +59,9 @@ enum Cmd {
     Export(export::ExportCmd),
     /// Write a complete, indexed copy of a truncated recording.
     Recover(recover::RecoverCmd),
+    /// Play a recording back onto iceoryx2, or re-run one process on its
+    /// recorded inputs and report the first output that differs.
+    Replay(replay::ReplayCmd),
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(BenchCmd),
@@ -328,6 +332,7 @@ fn main() -> ExitCode {
         Cmd::Gen(cmd) => gen::run(cmd),
         Cmd::Export(cmd) => export::run(cmd),
         Cmd::Recover(cmd) => recover::run(cmd),
+        Cmd::Replay(cmd) => replay::run(cmd),
         Cmd::Bench(BenchCmd::Ipc(cmd)) => bench_ipc::run(cmd),
     };
     match result {

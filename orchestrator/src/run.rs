@@ -84,15 +84,17 @@ pub enum RunError {
 }
 
 /// The orchestrator's ports in the run's domain.
-struct Ports {
-    node: Node<ipc::Service>,
-    clock: Publisher<Clock>,
-    done: Listener<ipc::Service>,
-    wakes: Vec<Notifier<ipc::Service>>,
+/// The orchestrator's ports of a run: the clock, every process's wake event, `done`.
+pub(crate) struct Ports {
+    pub(crate) node: Node<ipc::Service>,
+    pub(crate) clock: Publisher<Clock>,
+    pub(crate) done: Listener<ipc::Service>,
+    pub(crate) wakes: Vec<Notifier<ipc::Service>>,
 }
 
 impl Ports {
-    fn open(run_id: &str, procs: &[ProcessSpec]) -> anyhow::Result<Self> {
+    /// Opens the ports of a run whose processes are `procs`.
+    pub(crate) fn open(run_id: &str, procs: &[ProcessSpec]) -> anyhow::Result<Self> {
         let node = shoal_runtime::domain_node(run_id, "run/orchestrator")?;
         let clock = shoal_runtime::node_publisher::<Clock>(
             &node,
@@ -385,7 +387,8 @@ fn check_signal(r: WaitSetRunResult) -> Result<(), RunError> {
 }
 
 /// Waits until every process in `expected` has notified `done`.
-fn wait_done(
+/// Waits until every process in `expected` has notified `done`.
+pub(crate) fn wait_done(
     ports: &mut Ports,
     sup: &mut Supervisor,
     procs: &[ProcessSpec],

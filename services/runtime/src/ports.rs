@@ -125,6 +125,7 @@ fn open_pubsub<T: Sample>(
 /// A publisher of one sample type on one service.
 pub struct Publisher<T: Sample> {
     inner: IoxPublisher<ipc::Service, T, ()>,
+    factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
     service: String,
     seq: u64,
 }
@@ -146,6 +147,7 @@ impl<T: Sample> Publisher<T> {
             })?;
         Ok(Self {
             inner,
+            factory,
             service: service.to_string(),
             seq: 0,
         })
@@ -154,6 +156,11 @@ impl<T: Sample> Publisher<T> {
     /// The service name.
     pub fn service(&self) -> &str {
         &self.service
+    }
+
+    /// Subscribers connected to the service right now.
+    pub fn subscribers(&self) -> usize {
+        self.factory.dynamic_config().number_of_subscribers()
     }
 
     /// Stamps the header (sequence, this step's simulation time, publish

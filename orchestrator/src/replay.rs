@@ -1,0 +1,828 @@
+//! `shoal replay`: plays a recording back onto iceoryx2 in a new domain, or
+//! re-runs one process of one vehicle alone on its recorded inputs, in
+//! lockstep, and reports the first output that differs from the recording.
+//!
+//! A re-run is exact because lockstep makes a process a function of its
+//! inputs: at tick `t` it reads every sample stamped before `t` and nothing
+//! else. The replayer publishes, before each due tick, the recorded input
+//! samples stamped before it (with their original headers), publishes the
+//! clock, wakes the process, waits for `done`, and compares what it
+//! published with the recording sample by sample (wall-clock fields, which
+//! measure the machine, are masked).
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use ipc_types::schema::{FieldDesc, TypeDesc};
+use ipc_types::{Clock, Header, Sample};
+use recordings::Recording;
+use shoal_runtime::{ChannelLimits, Mode, Publisher, Subscriber};
+use shoal_scenario::{ProcessKind, ProcessSpec, Scenario};
+
+use crate::run::{wait_done, Ports};
+use crate::supervisor::Supervisor;
+use crate::sys;
+
+/// Arguments of `shoal replay`.
+#[derive(Debug, clap::Args)]
+pub struct ReplayCmd {
+    /// The recording (MCAP written by `shoal run`).
+    pub recording: PathBuf,
+    /// Playback speed against the recording's simulated time (2 = twice as
+    /// fast); 0 = as fast as possible.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Run id of the new domain (default: a fresh one, printed).
+    #[arg(long)]
+    pub run_id: Option<String>,
+    /// Before playing, wait (up to 60 s) until this many subscribers are
+    /// connected to the replayed channels.
+    #[arg(long, default_value_t = 0)]
+    pub wait_subscribers: usize,
+    /// Re-run this process kind (sim-plant, world, camera-pose, sonar,
+    /// planner, mpc) alone on its recorded inputs and compare its outputs.
+    #[arg(long)]
+    pub rerun: Option<String>,
+    /// The vehicle whose process is re-run (not needed for `world`).
+    #[arg(long)]
+    pub vehicle: Option<String>,
+    /// Override a scenario key for the re-run, `section.key=value` in TOML
+    /// (e.g. `follower.beta=0.2`); repeatable.
+    #[arg(long = "set")]
+    pub set: Vec<String>,
+    /// Directory holding the service binaries (default: next to `shoal`).
+    #[arg(long)]
+    pub bin_dir: Option<PathBuf>,
+    /// Print the re-run's report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A publisher of any recorded sample type, fed raw recorded bytes.
+trait AnyPublisher {
+    fn publish_raw(&mut self, data: &[u8]) -> anyhow::Result<()>;
+    fn subscribers(&self) -> usize;
+}
+
+struct Typed<T: Sample> {
+    publisher: Publisher<T>,
+}
+
+impl<T: Sample> AnyPublisher for Typed<T> {
+    fn publish_raw(&mut self, data: &[u8]) -> anyhow::Result<()> {
+        let sample: T = recordings::decode(data).context("a recorded sample of the wrong size")?;
+        self.publisher.publish_stamped(sample)?;
+        Ok(())
+    }
+    fn subscribers(&self) -> usize {
+        self.publisher.subscribers()
+    }
+}
+
+/// The service limits every opener of `topic` uses.
+fn limits_of(topic: &str, vehicles: usize, processes: usize) -> ChannelLimits {
+    match topic {
+        "/world" => ChannelLimits::world(vehicles),
+        "/stats" => shoal_runtime::stats::stats_limits(processes),
+        _ => ChannelLimits::vehicle(),
+    }
+}
+
+/// The iceoryx2 service of a recorded topic in domain `run_id`.
+fn service_of(run_id: &str, topic: &str) -> String {
+    format!("shoal/{run_id}{topic}")
+}
+
+fn open_publisher(
+    node: &iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
+    schema: &str,
+    service: &str,
+    limits: &ChannelLimits,
+) -> anyhow::Result<Box<dyn AnyPublisher>> {
+    fn typed<T: Sample>(
+        node: &iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
+        service: &str,
+        limits: &ChannelLimits,
+    ) -> anyhow::Result<Box<dyn AnyPublisher>> {
+        Ok(Box::new(Typed::<T> {
+            publisher: shoal_runtime::node_publisher::<T>(node, service, limits)?,
+        }))
+    }
+    use ipc_types::*;
+    match schema {
+        "shoal/Truth" => typed::<Truth>(node, service, limits),
+        "shoal/Nav" => typed::<Nav>(node, service, limits),
+        "shoal/Thrust" => typed::<Thrust>(node, service, limits),
+        "shoal/World" => typed::<World>(node, service, limits),
+        "shoal/Sonar" => typed::<Sonar>(node, service, limits),
+        "shoal/Beacons" => typed::<Beacons>(node, service, limits),
+        "shoal/LeaderPose" => typed::<LeaderPose>(node, service, limits),
+        "shoal/Setpoint" => typed::<Setpoint>(node, service, limits),
+        "shoal/PlannerState" => typed::<PlannerState>(node, service, limits),
+        "shoal/MpcStats" => typed::<MpcStats>(node, service, limits),
+        "shoal/ProcessStats" => typed::<ProcessStats>(node, service, limits),
+        other => bail!("no sample type for schema {other}"),
+    }
+}
+
+/// The recorded run's scenario (resolved, as the processes read it).
+fn recorded_scenario(rec: &Recording) -> anyhow::Result<Scenario> {
+    let text = rec
+        .metadata()
+        .get("shoal.run")
+        .and_then(|m| m.get("scenario_toml"))
+        .context("the recording has no shoal.run/scenario_toml metadata")?;
+    Scenario::from_toml(text).context("the recorded scenario does not parse")
+}
+
+/// Runs `shoal replay`.
+pub fn run(cmd: ReplayCmd) -> anyhow::Result<()> {
+    let rec = Recording::open(&cmd.recording)
+        .with_context(|| format!("cannot read {}", cmd.recording.display()))?;
+    if rec.truncated() {
+        tracing::warn!("the recording is truncated; replaying what it holds");
+    }
+    match &cmd.rerun {
+        Some(kind) => {
+            let report = rerun(&rec, &cmd, kind)?;
+            if cmd.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                println!("{}", report.describe());
+            }
+            if report.difference.is_some() {
+                std::process::exit(3);
+            }
+            Ok(())
+        }
+        None => play(&rec, &cmd),
+    }
+}
+
+/// Plays every recorded message, in recorded order, onto a new domain.
+fn play(rec: &Recording, cmd: &ReplayCmd) -> anyhow::Result<()> {
+    if !(cmd.speed >= 0.0 && cmd.speed.is_finite()) {
+        bail!("--speed must be ≥ 0, got {}", cmd.speed);
+    }
+    let scenario = recorded_scenario(rec)?;
+    let run_id = cmd.run_id.clone().unwrap_or_else(sys::random_id);
+    let vehicles = scenario.vehicles.len();
+    let processes = scenario.processes().len();
+    let node = shoal_runtime::domain_node(&run_id, "replay")?;
+    let mut pubs: BTreeMap<u16, Box<dyn AnyPublisher>> = BTreeMap::new();
+    for c in rec.channels() {
+        let service = service_of(&run_id, &c.topic);
+        let p = open_publisher(
+            &node,
+            &c.schema_name,
+            &service,
+            &limits_of(&c.topic, vehicles, processes),
+        )
+        .with_context(|| format!("cannot open {service}"))?;
+        pubs.insert(c.id, p);
+    }
+    println!("replaying {} into run {run_id}", cmd.recording.display());
+    let result = (|| -> anyhow::Result<u64> {
+        if cmd.wait_subscribers > 0 {
+            let start = Instant::now();
+            while pubs.values().map(|p| p.subscribers()).sum::<usize>() < cmd.wait_subscribers {
+                if start.elapsed() > Duration::from_secs(60) {
+                    bail!("no {} subscriber(s) within 60 s", cmd.wait_subscribers);
+                }
+                node.wait(Duration::from_millis(10))
+                    .map_err(|_| anyhow::anyhow!("interrupted"))?;
+            }
+        }
+        let start = Instant::now();
+        let t0 = rec.messages().first().map_or(0, |m| m.log_time);
+        let mut sent = 0u64;
+        for m in rec.messages() {
+            if cmd.speed > 0.0 {
+                let due = Duration::from_secs_f64((m.log_time - t0) as f64 * 1e-9 / cmd.speed);
+                if let Some(wait) = due.checked_sub(start.elapsed()) {
+                    node.wait(wait)
+                        .map_err(|_| anyhow::anyhow!("interrupted after {sent} messages"))?;
+                }
+            }
+            if let Some(p) = pubs.get_mut(&m.channel) {
+                p.publish_raw(&m.data)?;
+                sent += 1;
+            }
+        }
+        Ok(sent)
+    })();
+    drop(pubs);
+    drop(node);
+    shoal_runtime::cleanup_domain(&run_id);
+    let sent = result?;
+    println!("replayed {sent} messages");
+    Ok(())
+}
+
+/// The recorded channels a process reads and writes.
+fn channels_of(
+    kind: ProcessKind,
+    vehicle: &str,
+    scenario: &Scenario,
+) -> (Vec<String>, Vec<String>) {
+    let v = |c: &str| format!("/{vehicle}/{c}");
+    match kind {
+        ProcessKind::SimPlant => (vec![v("thrust")], vec![v("truth"), v("nav")]),
+        ProcessKind::World => (
+            scenario
+                .vehicles
+                .iter()
+                .map(|x| format!("/{}/truth", x.name))
+                .collect(),
+            vec!["/world".into()],
+        ),
+        ProcessKind::CameraPose => (vec!["/world".into()], vec![v("beacons"), v("leader_pose")]),
+        ProcessKind::Sonar => (vec!["/world".into()], vec![v("sonar")]),
+        ProcessKind::Planner => {
+            let follower = scenario
+                .vehicles
+                .iter()
+                .any(|x| x.name == vehicle && x.parent.is_some());
+            let mut inputs = vec![v("nav"), v("sonar")];
+            if follower {
+                inputs.push(v("leader_pose"));
+            }
+            (inputs, vec![v("setpoint"), v("planner_state")])
+        }
+        ProcessKind::Mpc => (
+            vec![v("nav"), v("setpoint")],
+            vec![v("thrust"), v("mpc_stats")],
+        ),
+        ProcessKind::Recorder => (vec![], vec![]),
+    }
+}
+
+/// The first sample where a re-run's output differs from the recording.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Difference {
+    /// Topic.
+    pub topic: String,
+    /// Sequence number of the sample.
+    pub seq: u64,
+    /// Simulation time of the sample, s.
+    pub sim_time_s: f64,
+    /// Field path (`position_ned_m[1]`), or what is missing.
+    pub field: String,
+    /// Value in the recording.
+    pub recorded: String,
+    /// Value the re-run published.
+    pub rerun: String,
+}
+
+/// What a re-run found.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct RerunReport {
+    /// `<vehicle>/<process>`.
+    pub process: String,
+    /// Overrides applied.
+    pub overrides: Vec<String>,
+    /// Steps driven.
+    pub steps: u64,
+    /// Output samples compared, per topic.
+    pub compared: BTreeMap<String, u64>,
+    /// The first difference, if any.
+    pub difference: Option<Difference>,
+}
+
+impl RerunReport {
+    /// A human-readable verdict.
+    pub fn describe(&self) -> String {
+        let counts: Vec<String> = self
+            .compared
+            .iter()
+            .map(|(t, n)| format!("{t}: {n}"))
+            .collect();
+        match &self.difference {
+            None => format!(
+                "{}: no differences over {} steps ({})",
+                self.process,
+                self.steps,
+                counts.join(", ")
+            ),
+            Some(d) => format!(
+                "{}: first difference at t = {:.3} s on {} (seq {}): {}: recorded {} vs re-run {} ({} samples matched before it: {})",
+                self.process,
+                d.sim_time_s,
+                d.topic,
+                d.seq,
+                d.field,
+                d.recorded,
+                d.rerun,
+                self.compared.values().sum::<u64>(),
+                counts.join(", ")
+            ),
+        }
+    }
+}
+
+/// Applies `section.key=value` overrides (the value in TOML syntax).
+fn apply_overrides(scenario: &Scenario, sets: &[String]) -> anyhow::Result<Scenario> {
+    if sets.is_empty() {
+        return Ok(scenario.clone());
+    }
+    let mut doc: toml::Table = toml::from_str(&scenario.to_toml()?)?;
+    for s in sets {
+        let (path, value) = s
+            .split_once('=')
+            .with_context(|| format!("--set {s}: expected section.key=value"))?;
+        let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(value.to_string()));
+        let mut keys: Vec<&str> = path.trim().split('.').collect();
+        let last = keys.pop().context("empty --set key")?;
+        let mut table = &mut doc;
+        for k in keys {
+            table = table
+                .entry(k)
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+                .as_table_mut()
+                .with_context(|| format!("--set {s}: {k} is not a table"))?;
+        }
+        table.insert(last.to_string(), value);
+    }
+    Scenario::from_toml(&toml::to_string(&doc)?).context("the overridden scenario is invalid")
+}
+
+/// Re-runs one process on its recorded inputs.
+fn rerun(rec: &Recording, cmd: &ReplayCmd, kind_name: &str) -> anyhow::Result<RerunReport> {
+    let kind = ProcessKind::ALL
+        .into_iter()
+        .find(|k| k.name() == kind_name && *k != ProcessKind::Recorder)
+        .with_context(|| {
+            format!("--rerun {kind_name}: expected one of sim-plant, world, camera-pose, sonar, planner, mpc")
+        })?;
+    let base = recorded_scenario(rec)?;
+    let mode = rec
+        .metadata()
+        .get("shoal.run")
+        .and_then(|m| m.get("mode"))
+        .map_or("lockstep", String::as_str);
+    if mode != "lockstep" {
+        bail!("only a lockstep recording can be re-run exactly (this one is {mode})");
+    }
+    let vehicle = if kind == ProcessKind::World {
+        "run".to_string()
+    } else {
+        cmd.vehicle
+            .clone()
+            .context("--vehicle is required to re-run a vehicle's process")?
+    };
+    let mut scenario = apply_overrides(&base, &cmd.set)?;
+    crate::check::resolve(&mut scenario).context("the re-run's scenario is refused")?;
+    let mut spec: ProcessSpec = scenario
+        .processes()
+        .into_iter()
+        .find(|p| p.kind == kind && p.vehicle == vehicle)
+        .with_context(|| format!("no process {kind_name} of vehicle {vehicle} in the scenario"))?;
+    spec.index = 0;
+    let bin_dir = match &cmd.bin_dir {
+        Some(d) => d.clone(),
+        None => std::env::current_exe()?
+            .parent()
+            .map(PathBuf::from)
+            .context("cannot locate the service binaries")?,
+    };
+    let binary = bin_dir.join(kind.binary());
+    if !binary.is_file() {
+        bail!("service binary {} not found", binary.display());
+    }
+
+    let run_id = sys::random_id();
+    let dir = std::env::temp_dir().join(format!("shoal-rerun-{run_id}"));
+    std::fs::create_dir_all(&dir)?;
+    let scenario_path = dir.join("scenario.toml");
+    std::fs::write(&scenario_path, scenario.to_toml()?)?;
+    let procs = vec![spec.clone()];
+    let mut ports = Ports::open(&run_id, &procs)?;
+    let mut sup = Supervisor::default();
+    let result = drive(rec, &scenario, &spec, &run_id, &mut ports, &mut sup, || {
+        let args = vec![
+            "--run-id".to_string(),
+            run_id.clone(),
+            "--vehicle".into(),
+            spec.vehicle.clone(),
+            "--process".into(),
+            kind.name().into(),
+            "--index".into(),
+            "0".into(),
+            "--processes".into(),
+            "1".into(),
+            "--mode".into(),
+            Mode::Lockstep.as_str().into(),
+            "--period-s".into(),
+            format!("{}", 1.0 / scenario.rate_hz(kind)),
+            "--scenario".into(),
+            scenario_path.display().to_string(),
+        ];
+        (
+            binary.clone(),
+            args,
+            dir.join(format!("{}.{}.log", spec.vehicle, kind.name())),
+        )
+    });
+    sup.stop_all(|_| false, Duration::from_secs(2));
+    drop(ports);
+    shoal_runtime::cleanup_domain(&run_id);
+    let mut report = result?;
+    report.overrides = cmd.set.clone();
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(report)
+}
+
+/// One recorded output stream and what the re-run produced of it.
+struct OutputTap {
+    topic: String,
+    expected: Vec<Vec<u8>>,
+    next: usize,
+    sub: Box<dyn AnyTap>,
+    schema: String,
+}
+
+/// A subscriber of any type that returns raw sample bytes.
+trait AnyTap {
+    fn take(&mut self, out: &mut Vec<Vec<u8>>) -> anyhow::Result<()>;
+}
+
+struct TypedTap<T: Sample> {
+    sub: Subscriber<T>,
+}
+
+impl<T: Sample> AnyTap for TypedTap<T> {
+    fn take(&mut self, out: &mut Vec<Vec<u8>>) -> anyhow::Result<()> {
+        let far = shoal_runtime::StepContext {
+            sim_time_ns: u64::MAX,
+            tick: 0,
+            wake_mono_ns: 0,
+            since_last_ns: 0,
+            last: false,
+            mode: Mode::Realtime,
+        };
+        self.sub
+            .take_ready(&far, |v| out.push(bytemuck::bytes_of(&v).to_vec()))?;
+        Ok(())
+    }
+}
+
+fn open_tap(
+    node: &iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
+    schema: &str,
+    service: &str,
+    limits: &ChannelLimits,
+) -> anyhow::Result<Box<dyn AnyTap>> {
+    fn typed<T: Sample>(
+        node: &iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
+        service: &str,
+        limits: &ChannelLimits,
+    ) -> anyhow::Result<Box<dyn AnyTap>> {
+        Ok(Box::new(TypedTap::<T> {
+            sub: shoal_runtime::node_subscriber::<T>(node, service, limits, limits.max_buffer)?,
+        }))
+    }
+    use ipc_types::*;
+    match schema {
+        "shoal/Truth" => typed::<Truth>(node, service, limits),
+        "shoal/Nav" => typed::<Nav>(node, service, limits),
+        "shoal/Thrust" => typed::<Thrust>(node, service, limits),
+        "shoal/World" => typed::<World>(node, service, limits),
+        "shoal/Sonar" => typed::<Sonar>(node, service, limits),
+        "shoal/Beacons" => typed::<Beacons>(node, service, limits),
+        "shoal/LeaderPose" => typed::<LeaderPose>(node, service, limits),
+        "shoal/Setpoint" => typed::<Setpoint>(node, service, limits),
+        "shoal/PlannerState" => typed::<PlannerState>(node, service, limits),
+        "shoal/MpcStats" => typed::<MpcStats>(node, service, limits),
+        other => bail!("no sample type for schema {other}"),
+    }
+}
+
+/// Spawns the process, feeds it tick by tick and compares its outputs.
+#[allow(clippy::too_many_arguments)]
+fn drive(
+    rec: &Recording,
+    scenario: &Scenario,
+    spec: &ProcessSpec,
+    run_id: &str,
+    ports: &mut Ports,
+    sup: &mut Supervisor,
+    command: impl Fn() -> (PathBuf, Vec<String>, PathBuf),
+) -> anyhow::Result<RerunReport> {
+    let vehicles = scenario.vehicles.len();
+    let (inputs, outputs) = channels_of(spec.kind, &spec.vehicle, scenario);
+    let schema_of = |topic: &str| -> anyhow::Result<(u16, String)> {
+        let c = rec
+            .channel(topic)
+            .with_context(|| format!("the recording has no {topic}"))?;
+        Ok((c.id, c.schema_name.clone()))
+    };
+    // Inputs: recorded messages of the input topics, in recorded order.
+    let mut pubs: BTreeMap<u16, Box<dyn AnyPublisher>> = BTreeMap::new();
+    for t in &inputs {
+        let (id, schema) = schema_of(t)?;
+        pubs.insert(
+            id,
+            open_publisher(
+                &ports.node,
+                &schema,
+                &service_of(run_id, t),
+                &limits_of(t, vehicles, 1),
+            )?,
+        );
+    }
+    let feed: Vec<&recordings::StoredMessage> = rec
+        .messages()
+        .iter()
+        .filter(|m| pubs.contains_key(&m.channel))
+        .collect();
+    let mut taps = Vec::new();
+    for t in &outputs {
+        let (_, schema) = schema_of(t)?;
+        taps.push(OutputTap {
+            topic: t.clone(),
+            expected: rec
+                .topic_messages(t)
+                .filter_map(|m| {
+                    m.data
+                        .strip_prefix(&recordings::CDR_HEADER)
+                        .map(<[u8]>::to_vec)
+                })
+                .collect(),
+            next: 0,
+            sub: open_tap(
+                &ports.node,
+                &schema,
+                &service_of(run_id, t),
+                &limits_of(t, vehicles, 1),
+            )?,
+            schema,
+        });
+    }
+
+    let (binary, args, log) = command();
+    sup.spawn(spec, &binary, &args, &log)
+        .with_context(|| format!("cannot start {}", spec.label()))?;
+    wait_done(
+        ports,
+        sup,
+        std::slice::from_ref(spec),
+        &[0],
+        Duration::from_secs(30),
+        0.0,
+        Duration::ZERO,
+    )?;
+
+    let ticks = scenario.ticks();
+    let tick_ns = (scenario.rates.tick_s * 1e9).round() as u64;
+    let mut fed = 0usize;
+    let mut steps = 0u64;
+    let mut got = Vec::new();
+    let mut difference = None;
+    let mut seq = 0u64;
+    'ticks: for tick in 0..ticks {
+        if !spec.due(tick) {
+            continue;
+        }
+        let sim = tick * tick_ns;
+        while fed < feed.len() && feed[fed].log_time < sim {
+            let m = feed[fed];
+            if let Some(p) = pubs.get_mut(&m.channel) {
+                p.publish_raw(&m.data)?;
+            }
+            fed += 1;
+        }
+        let clock = Clock {
+            header: Header {
+                seq,
+                sim_time_ns: sim,
+                publish_mono_ns: shoal_runtime::mono_ns(),
+                origin_mono_ns: 0,
+                origin_sim_time_ns: sim,
+            },
+            tick,
+            tick_ns,
+            last: u64::from(tick + 1 == ticks),
+        };
+        seq += 1;
+        ports.clock.publish_stamped(clock)?;
+        ports.wakes[0]
+            .notify()
+            .map_err(|e| anyhow::anyhow!("wake: {e:?}"))?;
+        wait_done(
+            ports,
+            sup,
+            std::slice::from_ref(spec),
+            &[0],
+            Duration::from_secs(30),
+            sim as f64 * 1e-9,
+            Duration::ZERO,
+        )?;
+        steps += 1;
+        for tap in &mut taps {
+            got.clear();
+            tap.sub.take(&mut got)?;
+            for bytes in &got {
+                let k = tap.next;
+                tap.next += 1;
+                let d = match tap.expected.get(k) {
+                    None => Some((
+                        "(extra sample)".to_string(),
+                        "none".to_string(),
+                        "a sample".to_string(),
+                    )),
+                    Some(exp) => first_field_difference(&tap.schema, exp, bytes),
+                };
+                if let Some((field, recorded, rerun)) = d {
+                    let header: Header =
+                        bytemuck::pod_read_unaligned(&bytes[..std::mem::size_of::<Header>()]);
+                    difference = Some(Difference {
+                        topic: tap.topic.clone(),
+                        seq: header.seq,
+                        sim_time_s: header.sim_time_ns as f64 * 1e-9,
+                        field,
+                        recorded,
+                        rerun,
+                    });
+                    tap.next -= 1;
+                    break 'ticks;
+                }
+            }
+        }
+    }
+    if difference.is_none() {
+        for tap in &taps {
+            if tap.next < tap.expected.len() {
+                let exp = &tap.expected[tap.next];
+                let header: Header =
+                    bytemuck::pod_read_unaligned(&exp[..std::mem::size_of::<Header>()]);
+                difference = Some(Difference {
+                    topic: tap.topic.clone(),
+                    seq: header.seq,
+                    sim_time_s: header.sim_time_ns as f64 * 1e-9,
+                    field: "(missing sample)".into(),
+                    recorded: "a sample".into(),
+                    rerun: "none".into(),
+                });
+                break;
+            }
+        }
+    }
+    Ok(RerunReport {
+        process: spec.label(),
+        overrides: Vec::new(),
+        steps,
+        compared: taps
+            .iter()
+            .map(|t| (t.topic.clone(), t.next as u64))
+            .collect(),
+        difference,
+    })
+}
+
+/// The fields of a recorded schema.
+fn fields_of(schema: &str) -> Option<Vec<FieldDesc>> {
+    use ipc_types::*;
+    Some(match schema {
+        "shoal/Truth" => Truth::fields(),
+        "shoal/Nav" => Nav::fields(),
+        "shoal/Thrust" => Thrust::fields(),
+        "shoal/World" => World::fields(),
+        "shoal/Sonar" => Sonar::fields(),
+        "shoal/Beacons" => Beacons::fields(),
+        "shoal/LeaderPose" => LeaderPose::fields(),
+        "shoal/Setpoint" => Setpoint::fields(),
+        "shoal/PlannerState" => PlannerState::fields(),
+        "shoal/MpcStats" => MpcStats::fields(),
+        _ => return None,
+    })
+}
+
+/// The first field (in declaration order) whose bytes differ between `a`
+/// and `b`, skipping wall-clock fields: `(path, value in a, value in b)`.
+pub fn first_field_difference(
+    schema: &str,
+    a: &[u8],
+    b: &[u8],
+) -> Option<(String, String, String)> {
+    if a.len() != b.len() {
+        return Some(("(size)".into(), a.len().to_string(), b.len().to_string()));
+    }
+    let Some(fields) = fields_of(schema) else {
+        return (a != b).then(|| ("(bytes)".into(), "…".into(), "…".into()));
+    };
+    fn value(ros: &str, b: &[u8]) -> String {
+        let arr8 = |b: &[u8]| <[u8; 8]>::try_from(b).unwrap_or_default();
+        let arr4 = |b: &[u8]| <[u8; 4]>::try_from(b).unwrap_or_default();
+        match ros {
+            "float64" => format!("{:?}", f64::from_ne_bytes(arr8(b))),
+            "float32" => format!("{:?}", f32::from_ne_bytes(arr4(b))),
+            "uint64" => u64::from_ne_bytes(arr8(b)).to_string(),
+            "int64" => i64::from_ne_bytes(arr8(b)).to_string(),
+            "uint32" => u32::from_ne_bytes(arr4(b)).to_string(),
+            "int32" => i32::from_ne_bytes(arr4(b)).to_string(),
+            _ => format!("{b:02x?}"),
+        }
+    }
+    struct Walk<'a> {
+        a: &'a [u8],
+        b: &'a [u8],
+        off: usize,
+    }
+    fn walk_ty(
+        w: &mut Walk,
+        ty: &TypeDesc,
+        path: String,
+        wall: bool,
+    ) -> Option<(String, String, String)> {
+        match ty {
+            TypeDesc::Primitive { ros, size } => {
+                w.off = w.off.next_multiple_of(*size);
+                let r = w.off..w.off + size;
+                w.off += size;
+                let (x, y) = (w.a.get(r.clone())?, w.b.get(r)?);
+                (!wall && x != y).then(|| (path, value(ros, x), value(ros, y)))
+            }
+            TypeDesc::Nested { fields, .. } => walk(w, &fields(), &path, wall),
+            TypeDesc::Array { elem, len } => {
+                (0..*len).find_map(|i| walk_ty(w, elem, format!("{path}[{i}]"), wall))
+            }
+        }
+    }
+    fn walk(
+        w: &mut Walk,
+        fields: &[FieldDesc],
+        prefix: &str,
+        wall: bool,
+    ) -> Option<(String, String, String)> {
+        for f in fields {
+            let path = if prefix.is_empty() {
+                f.name.to_string()
+            } else {
+                format!("{prefix}.{}", f.name)
+            };
+            let is_wall = wall || f.name.ends_with("mono_ns") || f.name == "solve_ns";
+            if let Some(d) = walk_ty(w, &f.ty, path, is_wall) {
+                return Some(d);
+            }
+        }
+        None
+    }
+    walk(&mut Walk { a, b, off: 0 }, &fields, "", false)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ipc_types::Truth;
+
+    #[test]
+    fn the_first_differing_field_is_named_and_wall_clock_fields_are_ignored() {
+        let mut a = Truth::zeroed();
+        a.position_ned_m = [1.0, 2.0, 3.0];
+        a.velocity_body_mps = [0.5, 0.0, 0.0];
+        let mut b = a;
+        b.header.publish_mono_ns = 99;
+        b.thrust_applied_mono_ns = 7;
+        assert_eq!(
+            first_field_difference(
+                "shoal/Truth",
+                bytemuck::bytes_of(&a),
+                bytemuck::bytes_of(&b)
+            ),
+            None
+        );
+        b.position_ned_m[1] = 2.5;
+        b.velocity_body_mps[0] = 0.6;
+        let d = first_field_difference(
+            "shoal/Truth",
+            bytemuck::bytes_of(&a),
+            bytemuck::bytes_of(&b),
+        )
+        .unwrap();
+        assert_eq!(
+            d,
+            (
+                "position_ned_m[1]".to_string(),
+                "2.0".to_string(),
+                "2.5".to_string()
+            )
+        );
+    }
+
+    #[test]
+    fn overrides_set_nested_keys_with_toml_values() {
+        let s = Scenario::paper().unwrap();
+        let o = apply_overrides(&s, &["follower.beta=0.25".into(), "seed=7".into()]).unwrap();
+        assert_eq!(o.seed, 7);
+        assert_eq!(
+            o.follower.get("beta").and_then(|v| v.as_float()),
+            Some(0.25)
+        );
+        assert!(apply_overrides(&s, &["nonsense".into()]).is_err());
+    }
+}
