@@ -20,10 +20,13 @@
 //! ```
 
 mod reader;
+mod recover;
 mod registry;
+mod scan;
 mod writer;
 
 pub use reader::{ChannelStats, InspectReport, Recording, RecordingError, StoredMessage};
+pub use recover::{recover, RecoverError, RecoverReport};
 pub use registry::{all_types, type_info_by_schema, TypeInfo};
 pub use writer::{Compression, RecordingWriter, WriterError, WriterOptions, CDR_HEADER};
 

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use sha2::{Digest, Sha256};
 
 use crate::registry::type_info_by_schema;
+use crate::scan::{scan, Item};
 use crate::writer::CDR_HEADER;
 
 /// Errors of the reader.
@@ -29,47 +30,6 @@ pub enum RecordingError {
         /// What is wrong.
         reason: String,
     },
-}
-
-/// What a pass over the records has found so far.
-#[derive(Default)]
-struct Collect {
-    channels: Vec<ChannelInfo>,
-    schemas: HashMap<u16, String>,
-    messages: Vec<StoredMessage>,
-    metadata: BTreeMap<String, BTreeMap<String, String>>,
-}
-
-impl Collect {
-    /// Takes one record; schemas, channels and metadata go to `file` (they
-    /// stay known even if this chunk is dropped), messages stay in `self`.
-    fn record(&mut self, record: mcap::records::Record<'_>, file: &mut Collect) {
-        use mcap::records::Record;
-        match record {
-            Record::Schema { header, .. } => {
-                file.schemas.insert(header.id, header.name.clone());
-            }
-            Record::Channel(c) if !file.channels.iter().any(|x| x.id == c.id) => {
-                let schema_name = file.schemas.get(&c.schema_id).cloned().unwrap_or_default();
-                file.channels.push(ChannelInfo {
-                    id: c.id,
-                    topic: c.topic.clone(),
-                    schema_name,
-                    encoding: c.message_encoding.clone(),
-                });
-            }
-            Record::Message { header, data } => self.messages.push(StoredMessage {
-                channel: header.channel_id,
-                log_time: header.log_time,
-                sequence: header.sequence,
-                data: data.into_owned(),
-            }),
-            Record::Metadata(m) => {
-                file.metadata.insert(m.name.clone(), m.metadata.clone());
-            }
-            _ => {}
-        }
-    }
 }
 
 /// One channel of a recording.
@@ -106,6 +66,8 @@ pub struct Recording {
     messages: Vec<StoredMessage>,
     metadata: BTreeMap<String, BTreeMap<String, String>>,
     truncated: bool,
+    stop_reason: Option<String>,
+    dropped_bytes: u64,
 }
 
 impl Recording {
@@ -118,65 +80,62 @@ impl Recording {
         Self::from_bytes(path, &bytes)
     }
 
-    /// Parses MCAP bytes.
+    /// Parses MCAP bytes. Never panics and allocates at most a small
+    /// multiple of `bytes.len()`, whatever the bytes hold (see the `scan`
+    /// module): a file cut short or corrupted after some complete chunks
+    /// gives those chunks and [`Self::truncated`]; a file broken before
+    /// anything readable is an error.
     pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Self, RecordingError> {
-        let format_err = |reason: String| RecordingError::Format {
-            path: path.to_path_buf(),
-            reason,
-        };
-        if bytes.len() < 8 || &bytes[..8] != mcap::MAGIC {
-            return Err(format_err("no MCAP magic at the start".into()));
+        let mut schemas: HashMap<u16, String> = HashMap::new();
+        let mut channels: Vec<ChannelInfo> = Vec::new();
+        let mut messages: Vec<StoredMessage> = Vec::new();
+        let mut metadata: BTreeMap<String, BTreeMap<String, String>> = BTreeMap::new();
+        let end = scan(bytes, |item| match item {
+            Item::Schema(s) => {
+                schemas.insert(s.id, s.name);
+            }
+            Item::Channel(c) if !channels.iter().any(|x| x.id == c.id) => {
+                channels.push(ChannelInfo {
+                    id: c.id,
+                    topic: c.topic,
+                    schema_name: schemas.get(&c.schema_id).cloned().unwrap_or_default(),
+                    encoding: c.message_encoding,
+                });
+            }
+            Item::Message(m) => messages.push(StoredMessage {
+                channel: m.channel_id,
+                log_time: m.log_time,
+                sequence: m.sequence,
+                data: m.data,
+            }),
+            Item::Metadata { name, values } => {
+                metadata.insert(name, values);
+            }
+            Item::Header { .. } | Item::Channel(_) => {}
+        });
+        if end.good_end <= mcap::MAGIC.len() && end.error.is_some() {
+            return Err(RecordingError::Format {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "broken before its first complete record: {}",
+                    end.error.unwrap_or_default()
+                ),
+            });
         }
         let complete = bytes.len() >= 16 && &bytes[bytes.len() - 8..] == mcap::MAGIC;
-        let mut truncated = !complete;
-
-        let reader = mcap::read::LinearReader::new_with_options(
-            bytes,
-            mcap::read::Options::IgnoreEndMagic.into(),
-        )
-        .map_err(|e| format_err(e.to_string()))?;
-        let mut state = Collect::default();
-        for record in reader {
-            let Ok(record) = record else {
-                truncated = true;
-                break;
-            };
-            if let mcap::records::Record::Chunk { header, data } = record {
-                // A chunk counts only if it decodes whole.
-                let mut chunk_state = Collect::default();
-                let complete = match mcap::read::ChunkReader::new(header, &data) {
-                    Ok(chunk) => chunk.into_iter().all(|r| match r {
-                        Ok(r) => {
-                            chunk_state.record(r, &mut state);
-                            true
-                        }
-                        Err(_) => false,
-                    }),
-                    Err(_) => false,
-                };
-                if !complete {
-                    truncated = true;
-                    break;
-                }
-                state.messages.append(&mut chunk_state.messages);
-            } else {
-                let mut top = Collect::default();
-                top.record(record, &mut state);
-                state.messages.append(&mut top.messages);
-            }
-        }
-        let Collect {
-            channels,
-            messages,
-            metadata,
-            ..
-        } = state;
+        let truncated = !complete || !end.data_end || end.error.is_some();
         Ok(Self {
             path: path.to_path_buf(),
             channels,
             messages,
             metadata,
             truncated,
+            stop_reason: end.error,
+            dropped_bytes: if end.data_end {
+                0
+            } else {
+                (bytes.len() - end.good_end) as u64
+            },
         })
     }
 
@@ -224,6 +183,18 @@ impl Recording {
     /// True if the file was cut short (no footer, or a broken last chunk).
     pub fn truncated(&self) -> bool {
         self.truncated
+    }
+
+    /// Why reading stopped before the end of the data section, if it did
+    /// (e.g. `record 0x06 at byte 1234 claims 5000 bytes, 300 remain`).
+    pub fn stop_reason(&self) -> Option<&str> {
+        self.stop_reason.as_deref()
+    }
+
+    /// Bytes after the last complete record that could not be read (0 for
+    /// a file whose data section ended properly).
+    pub fn dropped_bytes(&self) -> u64 {
+        self.dropped_bytes
     }
 
     /// One hash per message (topic, log time, payload with wall-clock fields
@@ -328,6 +299,8 @@ impl Recording {
             },
             end_s: last as f64 * 1e-9,
             truncated: self.truncated,
+            dropped_bytes: self.dropped_bytes,
+            stop_reason: self.stop_reason.clone(),
             channels: per.into_values().collect(),
             metadata: self.metadata.clone(),
         }
@@ -368,6 +341,10 @@ pub struct InspectReport {
     pub end_s: f64,
     /// The file was cut short.
     pub truncated: bool,
+    /// Bytes after the last complete record that could not be read.
+    pub dropped_bytes: u64,
+    /// Why reading stopped early, if it did.
+    pub stop_reason: Option<String>,
     /// Per channel.
     pub channels: Vec<ChannelStats>,
     /// Metadata records.

@@ -1,0 +1,288 @@
+//! Recovering a recording whose writer died: everything up to the last
+//! complete chunk is copied into a new, complete MCAP file with a summary
+//! and indexes, so every reader (and seeking) works on it again.
+//!
+//! ```no_run
+//! let report = recordings::recover("run/recording.mcap".as_ref(), "run/recovered.mcap".as_ref())?;
+//! println!("{} messages saved, {} bytes dropped", report.messages, report.dropped_bytes);
+//! # Ok::<(), recordings::RecoverError>(())
+//! ```
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use crate::scan::{scan, Item};
+
+/// Why a recording could not be recovered.
+#[derive(Debug, thiserror::Error)]
+pub enum RecoverError {
+    /// The input could not be read.
+    #[error("cannot read {path}: {source}")]
+    Read {
+        /// The input.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The input holds nothing readable.
+    #[error("{path} cannot be recovered: {reason}")]
+    Unreadable {
+        /// The input.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The output exists already; nothing is overwritten.
+    #[error("{0} exists already (nothing was overwritten); choose another --out")]
+    Exists(PathBuf),
+    /// The output could not be written.
+    #[error("cannot write {path}: {source}")]
+    Write {
+        /// The output (or its temporary file).
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The MCAP writer refused something.
+    #[error("mcap: {0}")]
+    Mcap(#[from] mcap::McapError),
+    /// The copy did not read back as written (a bug; the copy is removed).
+    #[error("the recovered copy does not read back: {0}")]
+    Verify(String),
+}
+
+/// What [`recover`] did.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct RecoverReport {
+    /// The input file.
+    pub input: String,
+    /// The complete copy.
+    pub output: String,
+    /// Size of the input, bytes.
+    pub input_bytes: u64,
+    /// Bytes of the input that were read: up to the end of its last
+    /// complete record.
+    pub kept_bytes: u64,
+    /// Bytes after that, which could not be read and were dropped (0 for
+    /// an input whose data section was complete).
+    pub dropped_bytes: u64,
+    /// The input's data section ended properly (only its summary, which the
+    /// copy rebuilds, was missing or cut).
+    pub data_section_complete: bool,
+    /// The input was cut short or corrupt.
+    pub input_truncated: bool,
+    /// Why reading the input stopped, if it stopped early.
+    pub stop_reason: Option<String>,
+    /// Complete chunks read.
+    pub chunks: u64,
+    /// Schemas copied.
+    pub schemas: u64,
+    /// Channels copied.
+    pub channels: u64,
+    /// Metadata records copied.
+    pub metadata: u64,
+    /// Messages copied.
+    pub messages: u64,
+    /// Size of the copy, bytes.
+    pub output_bytes: u64,
+}
+
+/// Copies what is readable of `input` into a new complete MCAP file at
+/// `output` (which must not exist: nothing is overwritten). Chunks keep
+/// the input's compression. The copy is written beside `output` under a
+/// temporary name, read back and checked, then moved into place.
+pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverError> {
+    if output.exists() {
+        return Err(RecoverError::Exists(output.to_path_buf()));
+    }
+    let bytes = std::fs::read(input).map_err(|source| RecoverError::Read {
+        path: input.to_path_buf(),
+        source,
+    })?;
+    let mut name = output.file_name().unwrap_or_default().to_os_string();
+    name.push(".partial");
+    let tmp = output.with_file_name(name);
+    let file = File::options()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .map_err(|source| RecoverError::Write {
+            path: tmp.clone(),
+            source,
+        })?;
+    let result = copy(input, &bytes, file, output).and_then(|mut report| {
+        report.output_bytes = verify(&tmp, &report)?;
+        // Hard link then unlink: fails rather than replace an output that
+        // appeared meanwhile.
+        std::fs::hard_link(&tmp, output).map_err(|source| {
+            if source.kind() == std::io::ErrorKind::AlreadyExists {
+                RecoverError::Exists(output.to_path_buf())
+            } else {
+                RecoverError::Write {
+                    path: output.to_path_buf(),
+                    source,
+                }
+            }
+        })?;
+        Ok(report)
+    });
+    let _ = std::fs::remove_file(&tmp);
+    result
+}
+
+/// Writes the copy into `file`; the report names `output`.
+fn copy(
+    input: &Path,
+    bytes: &[u8],
+    file: File,
+    output: &Path,
+) -> Result<RecoverReport, RecoverError> {
+    // First pass: what is there (the profile and compression go in the
+    // copy's header and options).
+    let mut profile = String::new();
+    let probe = scan(bytes, |item| {
+        if let Item::Header { profile: p } = item {
+            profile = p;
+        }
+    });
+    if probe.good_end <= mcap::MAGIC.len() {
+        return Err(RecoverError::Unreadable {
+            path: input.to_path_buf(),
+            reason: probe
+                .error
+                .unwrap_or_else(|| "no record after the magic".into()),
+        });
+    }
+    let compression = match probe.compression.as_deref() {
+        Some("lz4") => Some(mcap::Compression::Lz4),
+        Some("") => None,
+        _ => Some(mcap::Compression::Zstd),
+    };
+    let mut writer = mcap::WriteOptions::new()
+        .compression(compression)
+        .compression_threads(0)
+        .profile(profile)
+        .library(format!("shoal recover {}", env!("CARGO_PKG_VERSION")))
+        .create(BufWriter::with_capacity(1 << 20, file))?;
+
+    let mut schema_ids: HashMap<u16, u16> = HashMap::new();
+    let mut channel_ids: HashMap<u16, u16> = HashMap::new();
+    let mut report = RecoverReport {
+        input: input.display().to_string(),
+        output: output.display().to_string(),
+        input_bytes: bytes.len() as u64,
+        kept_bytes: 0,
+        dropped_bytes: 0,
+        data_section_complete: false,
+        input_truncated: false,
+        stop_reason: None,
+        chunks: 0,
+        schemas: 0,
+        channels: 0,
+        metadata: 0,
+        messages: 0,
+        output_bytes: 0,
+    };
+    let mut failure: Option<mcap::McapError> = None;
+    let end = scan(bytes, |item| {
+        if failure.is_some() {
+            return;
+        }
+        let step = (|| -> Result<(), mcap::McapError> {
+            match item {
+                Item::Header { .. } => {}
+                Item::Schema(s) => {
+                    if let std::collections::hash_map::Entry::Vacant(e) = schema_ids.entry(s.id) {
+                        e.insert(writer.add_schema(&s.name, &s.encoding, &s.data)?);
+                        report.schemas += 1;
+                    }
+                }
+                Item::Channel(c) => {
+                    if channel_ids.contains_key(&c.id) {
+                        return Ok(());
+                    }
+                    // Schema id 0 means "no schema"; an unknown one is dropped to 0.
+                    let schema = schema_ids.get(&c.schema_id).copied().unwrap_or(0);
+                    let id =
+                        writer.add_channel(schema, &c.topic, &c.message_encoding, &c.metadata)?;
+                    channel_ids.insert(c.id, id);
+                    report.channels += 1;
+                }
+                Item::Message(m) => {
+                    // A message of a channel never declared cannot be written.
+                    if let Some(&id) = channel_ids.get(&m.channel_id) {
+                        writer.write_to_known_channel(
+                            &mcap::records::MessageHeader {
+                                channel_id: id,
+                                sequence: m.sequence,
+                                log_time: m.log_time,
+                                publish_time: m.publish_time,
+                            },
+                            &m.data,
+                        )?;
+                        report.messages += 1;
+                    }
+                }
+                Item::Metadata { name, values } => {
+                    writer.write_metadata(&mcap::records::Metadata {
+                        name,
+                        metadata: values,
+                    })?;
+                    report.metadata += 1;
+                }
+            }
+            Ok(())
+        })();
+        if let Err(e) = step {
+            failure = Some(e);
+        }
+    });
+    if let Some(e) = failure {
+        return Err(e.into());
+    }
+    writer.finish()?;
+    drop(writer);
+    let complete = bytes.len() >= 16 && bytes[bytes.len() - 8..] == *mcap::MAGIC;
+    report.kept_bytes = end.good_end as u64;
+    report.dropped_bytes = if end.data_end {
+        0
+    } else {
+        (bytes.len() - end.good_end) as u64
+    };
+    report.data_section_complete = end.data_end;
+    report.input_truncated = !complete || !end.data_end || end.error.is_some();
+    report.stop_reason = end.error;
+    report.chunks = end.chunks;
+    Ok(report)
+}
+
+/// Reads the copy back: complete, with a summary, and every message there.
+/// Returns its size.
+fn verify(tmp: &Path, report: &RecoverReport) -> Result<u64, RecoverError> {
+    let bytes = std::fs::read(tmp).map_err(|source| RecoverError::Read {
+        path: tmp.to_path_buf(),
+        source,
+    })?;
+    let back = crate::Recording::from_bytes(tmp, &bytes)
+        .map_err(|e| RecoverError::Verify(e.to_string()))?;
+    if back.truncated() {
+        return Err(RecoverError::Verify(format!(
+            "the copy reads as truncated: {:?}",
+            back.stop_reason()
+        )));
+    }
+    if back.messages().len() as u64 != report.messages {
+        return Err(RecoverError::Verify(format!(
+            "{} messages written, {} read back",
+            report.messages,
+            back.messages().len()
+        )));
+    }
+    match mcap::Summary::read(&bytes) {
+        Ok(Some(_)) => Ok(bytes.len() as u64),
+        Ok(None) => Err(RecoverError::Verify("the copy has no summary".into())),
+        Err(e) => Err(RecoverError::Verify(format!("summary: {e}"))),
+    }
+}
