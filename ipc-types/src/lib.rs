@@ -34,7 +34,7 @@ pub const MAX_BEACONS: usize = 8;
 
 /// A sample type: a described, Pod, zero-copy struct with the common header.
 pub trait Sample:
-    Copy + bytemuck::Pod + ZeroCopySend + Described + std::fmt::Debug + Send + 'static
+    Copy + bytemuck::Pod + ZeroCopySend + Described + Finite + std::fmt::Debug + Send + 'static
 {
     /// The versioned iceoryx2 type name, e.g. `shoal.Nav.v1`.
     const TYPE_NAME: &'static str;
@@ -46,37 +46,67 @@ pub trait Sample:
     fn zeroed() -> Self {
         bytemuck::Zeroable::zeroed()
     }
-    /// True when every floating-point field is finite.
+    /// True when every floating-point field is finite (a check generated
+    /// per type by the declaring macro, see [`Finite`]; the schema-walking
+    /// reference is [`schema::finite_by_schema`]).
+    #[inline]
     fn is_finite(&self) -> bool {
-        all_finite(bytemuck::bytes_of(self), &Self::fields())
+        Finite::all_finite(self)
     }
 }
 
-fn all_finite(bytes: &[u8], fields: &[FieldDesc]) -> bool {
-    fn walk(bytes: &[u8], ty: &TypeDesc, off: &mut usize) -> bool {
-        match ty {
-            TypeDesc::Primitive { ros, size } => {
-                *off = off.next_multiple_of(*size);
-                let b = &bytes[*off..*off + size];
-                *off += size;
-                match *ros {
-                    "float64" => b
-                        .try_into()
-                        .map(|a: [u8; 8]| f64::from_ne_bytes(a).is_finite())
-                        .unwrap_or(false),
-                    "float32" => b
-                        .try_into()
-                        .map(|a: [u8; 4]| f32::from_ne_bytes(a).is_finite())
-                        .unwrap_or(false),
-                    _ => true,
-                }
+/// A value whose floating-point contents can be checked for NaN and
+/// infinities: `f64` and `f32` by value, integers always pass, arrays
+/// element by element, described structs field by field (the `described!`
+/// macro generates it, so a check compiles to straight-line code over the
+/// type's floats with no schema, allocation or recursion at run time).
+///
+/// ```
+/// use ipc_types::{Finite, World, Sample};
+/// let mut w = World::zeroed();
+/// assert!(w.all_finite());
+/// w.vehicles[7].position_ned_m[1] = f64::NEG_INFINITY;
+/// assert!(!w.all_finite());
+/// assert!([1.0f32, 2.0].all_finite() && ![1.0f32, f32::NAN].all_finite());
+/// ```
+pub trait Finite {
+    /// True when every floating-point value in `self` is finite.
+    fn all_finite(&self) -> bool;
+}
+
+macro_rules! finite_always {
+    ($($t:ty),* $(,)?) => {
+        $(impl Finite for $t {
+            #[inline(always)]
+            fn all_finite(&self) -> bool {
+                true
             }
-            TypeDesc::Nested { fields, .. } => fields().iter().all(|f| walk(bytes, &f.ty, off)),
-            TypeDesc::Array { elem, len } => (0..*len).all(|_| walk(bytes, elem, off)),
-        }
+        })*
+    };
+}
+finite_always!(u64, i64, u32, i32, u16, i16, u8, i8);
+
+impl Finite for f64 {
+    #[inline(always)]
+    fn all_finite(&self) -> bool {
+        f64::is_finite(*self)
     }
-    let mut off = 0;
-    fields.iter().all(|f| walk(bytes, &f.ty, &mut off))
+}
+
+impl Finite for f32 {
+    #[inline(always)]
+    fn all_finite(&self) -> bool {
+        f32::is_finite(*self)
+    }
+}
+
+impl<T: Finite, const N: usize> Finite for [T; N] {
+    #[inline]
+    fn all_finite(&self) -> bool {
+        // No early exit: a branch-free fold lets the compiler vectorise the
+        // check over float arrays and drop it entirely for integer arrays.
+        self.iter().fold(true, |ok, v| ok & v.all_finite())
+    }
 }
 
 /// Declares a `#[repr(C)]` Pod struct together with its self-description.
@@ -103,6 +133,12 @@ macro_rules! described {
         impl FieldType for $name {
             fn describe() -> TypeDesc {
                 TypeDesc::Nested { ros: $ros, fields: <$name as Described>::fields }
+            }
+        }
+        impl $crate::Finite for $name {
+            #[inline]
+            fn all_finite(&self) -> bool {
+                true $( & $crate::Finite::all_finite(&self.$field) )*
             }
         }
     };
@@ -608,6 +644,7 @@ mod tests {
         check_layout::<MpcStats>();
         check_layout::<Clock>();
         check_layout::<ProcessStats>();
+        check_layout::<Mixed>();
     }
 
     #[test]
@@ -639,7 +676,204 @@ mod tests {
         assert_eq!(wake_service_name("r", "L", "mpc"), "shoal/r/L/mpc/wake");
     }
 
+    sample! {
+        /// Test-only sample mixing f32, integers of every width and nested
+        /// arrays, so the generated check is exercised beyond f64 fields.
+        pub struct Mixed("shoal/Mixed", "shoal.Mixed.v1", size = 256) {
+            /// Common header.
+            pub header: Header,
+            /// A single f32.
+            pub a: f32,
+            /// An f32 array.
+            pub b: [f32; 5],
+            /// A signed integer.
+            pub c: i64,
+            /// Nested structs in an array.
+            pub poses: [VehiclePose; 2],
+            /// Small integers.
+            pub d: [i16; 3],
+            /// More.
+            pub e: u16,
+            /// Explicit padding.
+            pub _pad0: [i8; 8],
+            /// An f64 after the integers.
+            pub f: f64,
+        }
+    }
+
+    /// Byte offset and width of every float of `T`, found from its schema.
+    fn float_slots<T: Described>() -> Vec<(usize, usize)> {
+        fn walk(ty: &TypeDesc, off: &mut usize, out: &mut Vec<(usize, usize)>) {
+            match ty {
+                TypeDesc::Primitive { ros, size } => {
+                    *off = off.next_multiple_of(*size);
+                    if ros.starts_with("float") {
+                        out.push((*off, *size));
+                    }
+                    *off += size;
+                }
+                TypeDesc::Nested { fields, .. } => {
+                    for f in fields() {
+                        walk(&f.ty, off, out);
+                    }
+                }
+                TypeDesc::Array { elem, len } => {
+                    for _ in 0..*len {
+                        walk(elem, off, out);
+                    }
+                }
+            }
+        }
+        let (mut off, mut out) = (0, Vec::new());
+        for f in T::fields() {
+            walk(&f.ty, &mut off, &mut out);
+        }
+        out
+    }
+
+    /// A value of `T` with random integer bytes and random finite floats,
+    /// then `inject` non-finite values written into the chosen floats
+    /// (`(slot index, kind)`: NaN with a random payload, +inf, -inf).
+    /// Returns the value and whether any injection landed.
+    fn random_sample<T: Sample>(seed: u64, inject: &[(usize, u8)]) -> (T, bool) {
+        let mut state = seed;
+        let mut next = move || {
+            // splitmix64
+            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^ (z >> 31)
+        };
+        let mut v = <T as Sample>::zeroed();
+        let bytes = bytemuck::bytes_of_mut(&mut v);
+        for chunk in bytes.chunks_mut(8) {
+            let r = next().to_ne_bytes();
+            chunk.copy_from_slice(&r[..chunk.len()]);
+        }
+        let slots = float_slots::<T>();
+        for &(off, size) in &slots {
+            let r = next();
+            if size == 8 {
+                // Clear one exponent bit when all are set: finite, any other value.
+                let bits = if (r >> 52) & 0x7ff == 0x7ff {
+                    r & !(1 << 60)
+                } else {
+                    r
+                };
+                bytes[off..off + 8].copy_from_slice(&bits.to_ne_bytes());
+            } else {
+                let r = r as u32;
+                let bits = if (r >> 23) & 0xff == 0xff {
+                    r & !(1 << 29)
+                } else {
+                    r
+                };
+                bytes[off..off + 4].copy_from_slice(&bits.to_ne_bytes());
+            }
+        }
+        let injected = !slots.is_empty() && !inject.is_empty();
+        for &(pick, kind) in inject {
+            let Some(&(off, size)) = slots.get(pick % slots.len().max(1)) else {
+                continue;
+            };
+            let payload = next();
+            if size == 8 {
+                let x = match kind % 3 {
+                    0 => f64::from_bits(
+                        0x7ff0_0000_0000_0000
+                            | (payload & 0x000f_ffff_ffff_ffff).max(1)
+                            | (payload & (1 << 63)),
+                    ),
+                    1 => f64::INFINITY,
+                    _ => f64::NEG_INFINITY,
+                };
+                bytes[off..off + 8].copy_from_slice(&x.to_ne_bytes());
+            } else {
+                let p = payload as u32;
+                let x = match kind % 3 {
+                    0 => f32::from_bits(0x7f80_0000 | (p & 0x007f_ffff).max(1) | (p & (1 << 31))),
+                    1 => f32::INFINITY,
+                    _ => f32::NEG_INFINITY,
+                };
+                bytes[off..off + 4].copy_from_slice(&x.to_ne_bytes());
+            }
+        }
+        (v, injected)
+    }
+
+    fn fast_equals_schema_walk<T: Sample>(
+        seed: u64,
+        inject: &[(usize, u8)],
+    ) -> Result<(), TestCaseError> {
+        let (v, injected) = random_sample::<T>(seed, inject);
+        let fast = v.is_finite();
+        prop_assert_eq!(
+            fast,
+            schema::finite_by_schema(&v),
+            "{} seed {}",
+            T::TYPE_NAME,
+            seed
+        );
+        prop_assert_eq!(
+            fast,
+            !injected,
+            "{} seed {} inject {:?}",
+            T::TYPE_NAME,
+            seed,
+            inject
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn float_slots_count_every_float() {
+        assert_eq!(float_slots::<World>().len(), 10 * MAX_VEHICLES);
+        assert_eq!(float_slots::<ProcessStats>().len(), 0);
+        assert_eq!(float_slots::<Mixed>().len(), 1 + 5 + 20 + 1);
+        assert_eq!(float_slots::<Truth>().len(), 22);
+    }
+
+    #[test]
+    fn generated_check_covers_f32_and_nested_fields() {
+        let mut m = Mixed::zeroed();
+        assert!(m.is_finite());
+        m.b[4] = f32::NAN;
+        assert!(!m.is_finite() && !schema::finite_by_schema(&m));
+        m.b[4] = 1.0;
+        m.poses[1].q_body_to_ned_wxyz[3] = f64::INFINITY;
+        assert!(!m.is_finite() && !schema::finite_by_schema(&m));
+        m.poses[1].q_body_to_ned_wxyz[3] = 0.5;
+        m.c = -1;
+        m.e = u16::MAX;
+        m._pad0 = [-1; 8];
+        assert!(m.is_finite() && schema::finite_by_schema(&m));
+        m.f = f64::NEG_INFINITY;
+        assert!(!m.is_finite());
+        // ProcessStats has no floats: any bytes pass.
+        let (p, _) = random_sample::<ProcessStats>(3, &[]);
+        assert!(p.is_finite() && schema::finite_by_schema(&p));
+    }
+
     proptest! {
+        #[test]
+        fn generated_finite_check_equals_the_schema_walk(
+            seed in any::<u64>(),
+            inject in proptest::collection::vec((any::<usize>(), any::<u8>()), 0..4),
+        ) {
+            fast_equals_schema_walk::<World>(seed, &inject)?;
+            fast_equals_schema_walk::<ProcessStats>(seed, &inject)?;
+            fast_equals_schema_walk::<Truth>(seed, &inject)?;
+            fast_equals_schema_walk::<Nav>(seed, &inject)?;
+            fast_equals_schema_walk::<Sonar>(seed, &inject)?;
+            fast_equals_schema_walk::<LeaderPose>(seed, &inject)?;
+            fast_equals_schema_walk::<PlannerState>(seed, &inject)?;
+            fast_equals_schema_walk::<MpcStats>(seed, &inject)?;
+            fast_equals_schema_walk::<Clock>(seed, &inject)?;
+            fast_equals_schema_walk::<Mixed>(seed, &inject)?;
+            fast_equals_schema_walk::<crate::bench::BenchPing4K>(seed, &inject)?;
+        }
+
         #[test]
         fn nav_bytes_round_trip(vals in proptest::collection::vec(-1e6f64..1e6, 17), seq in any::<u64>()) {
             let mut nav = Nav::zeroed();

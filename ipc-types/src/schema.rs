@@ -246,3 +246,45 @@ pub fn wall_clock_ranges<T: Described>() -> Vec<std::ops::Range<usize>> {
     }
     out
 }
+
+/// True when every `float64` / `float32` of `value` is finite, found by
+/// walking `T`'s description over its bytes. This is the reference the
+/// generated [`crate::Finite`] check is tested against; it allocates the
+/// field lists on every call and is far too slow for a hot path (use
+/// [`crate::Sample::is_finite`] there).
+pub fn finite_by_schema<T: Described + bytemuck::Pod>(value: &T) -> bool {
+    fn walk(bytes: &[u8], ty: &TypeDesc, off: &mut usize) -> bool {
+        match ty {
+            TypeDesc::Primitive { ros, size } => {
+                *off = off.next_multiple_of(*size);
+                let Some(b) = bytes.get(*off..*off + size) else {
+                    return false;
+                };
+                *off += size;
+                match *ros {
+                    "float64" => b
+                        .try_into()
+                        .map(|a: [u8; 8]| f64::from_ne_bytes(a).is_finite())
+                        .unwrap_or(false),
+                    "float32" => b
+                        .try_into()
+                        .map(|a: [u8; 4]| f32::from_ne_bytes(a).is_finite())
+                        .unwrap_or(false),
+                    _ => true,
+                }
+            }
+            // No short-circuit: the offset must advance over every field.
+            TypeDesc::Nested { fields, .. } => fields()
+                .iter()
+                .fold(true, |ok, f| walk(bytes, &f.ty, off) & ok),
+            TypeDesc::Array { elem, len } => {
+                (0..*len).fold(true, |ok, _| walk(bytes, elem, off) & ok)
+            }
+        }
+    }
+    let bytes = bytemuck::bytes_of(value);
+    let mut off = 0;
+    T::fields()
+        .iter()
+        .fold(true, |ok, f| walk(bytes, &f.ty, &mut off) & ok)
+}
