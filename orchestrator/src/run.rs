@@ -142,7 +142,13 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         }
     }
 
+    // A run that died (SIGKILL, power loss) left its domain behind: remove it.
+    for (dead, files) in shoal_runtime::sweep_stale_domains() {
+        tracing::warn!(run = %dead, files, "removed the shared memory of a dead run");
+    }
     let run_id = sys::random_id();
+    shoal_runtime::domain::claim_domain(&run_id, std::process::id())
+        .context("cannot create the run's domain directory")?;
     // Written first, so tools and tests can find the live run's domain.
     let run_json = serde_json::json!({
         "run_id": run_id,

@@ -77,6 +77,61 @@ pub fn cleanup_domain(run_id: &str) -> usize {
     removed
 }
 
+/// The file in a run's root that names the process owning the run.
+const OWNER_FILE: &str = "owner.pid";
+
+/// Marks `pid` (the orchestrator) as the owner of the run's domain, so a
+/// later run can tell a dead run's leftovers from a live run's files.
+pub fn claim_domain(run_id: &str, pid: u32) -> std::io::Result<()> {
+    let root = domain_root(run_id);
+    std::fs::create_dir_all(&root)?;
+    std::fs::write(root.join(OWNER_FILE), pid.to_string())
+}
+
+/// True when a process with this pid exists.
+fn alive(pid: i32) -> bool {
+    // SAFETY: kill with signal 0 only checks that the pid exists and may be signalled.
+    #[allow(unsafe_code)]
+    let r = unsafe { libc::kill(pid, 0) };
+    r == 0 || std::io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
+}
+
+/// Runs whose owner (the orchestrator that claimed them) is dead: their
+/// domain files are leftovers of a crash.
+pub fn stale_domains() -> Vec<String> {
+    let mut out = Vec::new();
+    let Ok(entries) = std::fs::read_dir("/tmp/shoal") else {
+        return out;
+    };
+    for e in entries.flatten() {
+        let Some(run_id) = e.file_name().to_str().map(str::to_string) else {
+            continue;
+        };
+        let owner = std::fs::read_to_string(e.path().join(OWNER_FILE))
+            .ok()
+            .and_then(|s| s.trim().parse::<i32>().ok());
+        if let Some(pid) = owner {
+            if pid > 0 && !alive(pid) {
+                out.push(run_id);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// Removes the domain files of every run whose owner is dead; returns
+/// `(run id, files removed)` for each.
+pub fn sweep_stale_domains() -> Vec<(String, usize)> {
+    stale_domains()
+        .into_iter()
+        .map(|id| {
+            let n = cleanup_domain(&id);
+            (id, n)
+        })
+        .collect()
+}
+
 /// Limits of one iceoryx2 service. Every process that opens a service must
 /// ask for the same limits, so they are computed here from the run's size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -42,7 +42,10 @@ use std::time::Duration;
 use iceoryx2::prelude::*;
 use ipc_types::{Clock, RunChannel};
 
-pub use domain::{cleanup_domain, iceoryx_config, list_domain_files, ChannelLimits};
+pub use domain::{
+    cleanup_domain, iceoryx_config, list_domain_files, stale_domains, sweep_stale_domains,
+    ChannelLimits,
+};
 pub use latency::LatencyRecorder;
 pub use ports::{Publisher, Subscriber};
 
