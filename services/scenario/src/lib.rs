@@ -28,6 +28,8 @@
 //! assert_eq!(s.processes().len(), 4 + 5 + 2);
 //! ```
 
+pub mod faults;
+
 use std::collections::{BTreeMap, HashMap};
 
 use serde::{Deserialize, Serialize};
@@ -274,6 +276,12 @@ pub struct Scenario {
     /// Acoustic modem of the baseline (`camera-pose`'s `AcousticConfig`).
     #[serde(default)]
     pub acoustic: toml::Table,
+    /// What happens when a process dies (`[supervision]`).
+    #[serde(default)]
+    pub supervision: faults::Supervision,
+    /// Faults injected on purpose (`[[faults]]`).
+    #[serde(default)]
+    pub faults: Vec<faults::Fault>,
 }
 
 /// A process kind.
@@ -431,6 +439,7 @@ impl Scenario {
 
     /// Checks the scenario's own keys: names, the formation tree, sizes, rates.
     pub fn validate(&self) -> Result<(), ScenarioError> {
+        faults::validate(self)?;
         // The name becomes a directory name (`runs/<name>-<time>`): no paths.
         if self.name.is_empty()
             || self.name.len() > MAX_NAME_LEN
