@@ -687,6 +687,112 @@ mod tests {
         assert!(l.processes.is_some(), "{l:?}");
     }
 
+    /// Byte ranges of the numbers in `text` (not inside names).
+    fn numbers(text: &str) -> Vec<(usize, usize)> {
+        let b = text.as_bytes();
+        let mut out = Vec::new();
+        let mut i = 0;
+        while i < b.len() {
+            let starts = b[i].is_ascii_digit()
+                || (b[i] == b'-' && b.get(i + 1).is_some_and(u8::is_ascii_digit));
+            let after_word = i > 0 && (b[i - 1].is_ascii_alphanumeric() || b[i - 1] == b'_');
+            if starts && !after_word {
+                let mut j = i + 1;
+                while j < b.len()
+                    && (b[j].is_ascii_digit() || matches!(b[j], b'.' | b'e' | b'E' | b'-' | b'+'))
+                {
+                    j += 1;
+                }
+                out.push((i, j));
+                i = j;
+            } else {
+                i += 1;
+            }
+        }
+        out
+    }
+
+    /// The whole check (every section, the start, the formation, the
+    /// machine) on the paper scenario with 1-3 of its numbers replaced by
+    /// edge values, and with extra sections holding edge values: never a
+    /// panic; whatever passes has finite displacements for every follower.
+    #[test]
+    fn resolve_never_panics_on_mutated_scenarios() {
+        const EDGE: &[&str] = &[
+            "nan", "inf", "-inf", "0", "-0.0", "1e308", "-1e308", "5e-324", "-1", "1", "0.5",
+            "1e6", "-8.0", "30.0", "2.0", "100",
+        ];
+        const SECTIONS: &[&str] = &[
+            "[camera]\nfov_deg = X\n",
+            "[camera]\nvisibility_range_m = X\n",
+            "[beacons]\nemission_half_angle_deg = X\n",
+            "[hull]\nradius_m = X\n",
+            "[pose]\nmin_beacons = 3\nmax_reprojection_rms_px = X\n",
+            "[sonar]\nrange_max_m = X\n",
+            "[mpc]\nhorizon = 5\n",
+            "[plant]\nstep_s = X\n",
+            "[plant.vehicle]\nmass_kg = X\n",
+            "[mpc]\nstep_s = X\n",
+            "[follower]\nmemory_behind_m = X\n",
+            "[acoustic]\nbit_rate_bps = X\n",
+            "[[obstacles]]\nkind = \"sphere\"\ncenter_ned_m = [X, 0.0, 10.0]\nradius_m = 3.0\n",
+            "[[obstacles]]\nkind = \"mesh\"\nvertices_ned_m = [[0.0, 0.0, X], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]\ntriangles = [[0, 1, 2]]\n",
+        ];
+        let paper = shoal_scenario::PAPER_TOML;
+        let nums = numbers(paper);
+        let mut seed: u64 = 0x5eed_1234_abcd_ef01;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let (mut cases, mut accepted) = (0, 0);
+        for _ in 0..400 {
+            let mut text = paper.to_string();
+            let mut picks: Vec<(usize, usize, &str)> = (0..1 + rnd() % 3)
+                .map(|_| {
+                    let (a, b) = nums[(rnd() as usize) % nums.len()];
+                    (a, b, EDGE[(rnd() as usize) % EDGE.len()])
+                })
+                .collect();
+            picks.sort_by_key(|p| std::cmp::Reverse(p.0));
+            picks.dedup_by_key(|p| p.0);
+            for (a, b, e) in picks {
+                text.replace_range(a..b, e);
+            }
+            if rnd() % 2 == 0 {
+                let sec = SECTIONS[(rnd() as usize) % SECTIONS.len()];
+                let val = EDGE[(rnd() as usize) % EDGE.len()];
+                // Appended sections must not repeat a table the paper has.
+                let head = sec.lines().next().unwrap_or("");
+                if !text.contains(head) || head.starts_with("[[") {
+                    text.push('\n');
+                    text.push_str(&sec.replace('X', val));
+                }
+            }
+            cases += 1;
+            let Ok(mut s) = Scenario::from_toml(&text) else {
+                continue;
+            };
+            if resolve(&mut s).is_ok() {
+                accepted += 1;
+                for v in s.vehicles.iter().filter(|v| v.parent.is_some()) {
+                    let (a, b) = (v.d_a_m.unwrap(), v.d_b_m.unwrap());
+                    assert!(
+                        a.is_finite() && b.is_finite(),
+                        "{}: {a} {b}\n{text}",
+                        v.name
+                    );
+                }
+            }
+        }
+        // The mutations reach the check, and some pass it.
+        assert_eq!(cases, 400);
+        assert!(accepted > 0);
+        println!("resolve: {accepted} of {cases} mutated scenarios accepted");
+    }
+
     #[test]
     fn resolve_accepts_the_paper_and_fills_every_displacement() {
         let mut s = Scenario::paper().unwrap();

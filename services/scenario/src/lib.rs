@@ -53,6 +53,15 @@ pub enum ScenarioError {
     },
 }
 
+/// A number as a person reads it: `7`, `0.5`, `5e-324` (not 324 zeros).
+fn short(x: f64) -> String {
+    if x != 0.0 && (x.abs() < 1e-4 || x.abs() >= 1e9) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
 fn invalid(key: impl Into<String>, reason: impl Into<String>) -> ScenarioError {
     ScenarioError::Invalid {
         key: key.into(),
@@ -463,6 +472,15 @@ impl Scenario {
                 format!("must be > 0, got {}", self.duration_s),
             ));
         }
+        if self.duration_s > MAX_DURATION_S {
+            return Err(invalid(
+                "duration_s",
+                format!(
+                    "must be at most {MAX_DURATION_S} s (a year), got {}",
+                    self.duration_s
+                ),
+            ));
+        }
         let r = &self.rates;
         if !(r.tick_s.is_finite() && r.tick_s > 0.0 && r.tick_s <= 1.0) {
             return Err(invalid(
@@ -483,11 +501,12 @@ impl Scenario {
                 return Err(invalid(key, format!("must be > 0 Hz, got {hz}")));
             }
             let ticks = 1.0 / (hz * r.tick_s);
-            if ticks < 0.999 || (ticks - ticks.round()).abs() > 1e-6 {
+            if !ticks.is_finite() || ticks < 0.999 || (ticks - ticks.round()).abs() > 1e-6 {
                 return Err(invalid(
                     key,
                     format!(
-                        "{hz} Hz is not a whole number of {} s ticks (period/tick = {ticks:.4})",
+                        "{} Hz is not a whole number of {} s ticks (period/tick = {ticks:.4})",
+                        short(hz),
                         r.tick_s
                     ),
                 ));
@@ -585,10 +604,15 @@ impl Scenario {
         }
         for (i, v) in self.vehicles.iter().enumerate() {
             let check3 = |key: String, a: &[f64; 3]| -> Result<(), ScenarioError> {
-                if a.iter().all(|x| x.is_finite()) {
-                    Ok(())
-                } else {
+                if !a.iter().all(|x| x.is_finite()) {
                     Err(invalid(key, "values must be finite"))
+                } else if a.iter().any(|x| x.abs() > MAX_COORD_M) {
+                    Err(invalid(
+                        key,
+                        format!("values must be within ±{MAX_COORD_M} m, got {a:?}"),
+                    ))
+                } else {
+                    Ok(())
                 }
             };
             if let Some(p) = &v.parent {
@@ -637,21 +661,21 @@ impl Scenario {
                 check3(format!("vehicles[{i}].start_ned_m"), s)?;
             }
             if let Some(y) = v.start_yaw_deg {
-                if !y.is_finite() {
+                if !(y.is_finite() && y.abs() <= 720.0) {
                     return Err(invalid(
                         format!("vehicles[{i}].start_yaw_deg"),
-                        "must be finite",
+                        format!("must be finite and within ±720°, got {y}"),
                     ));
                 }
             }
-            if let Some(d) = v.d_a_m {
-                if !d.is_finite() {
-                    return Err(invalid(format!("vehicles[{i}].d_a_m"), "must be finite"));
-                }
-            }
-            if let Some(d) = v.d_b_m {
-                if !d.is_finite() {
-                    return Err(invalid(format!("vehicles[{i}].d_b_m"), "must be finite"));
+            for (key, d) in [("d_a_m", v.d_a_m), ("d_b_m", v.d_b_m)] {
+                if let Some(d) = d {
+                    if !(d.is_finite() && d.abs() <= MAX_COORD_M) {
+                        return Err(invalid(
+                            format!("vehicles[{i}].{key}"),
+                            format!("must be finite and within ±{MAX_COORD_M} m, got {d}"),
+                        ));
+                    }
                 }
             }
         }
@@ -801,6 +825,14 @@ pub const MAX_VEHICLES: usize = 256;
 const fn ipc_types_max_vehicles() -> usize {
     MAX_VEHICLES
 }
+
+/// Longest simulated duration, s (a year).
+pub const MAX_DURATION_S: f64 = 365.0 * 86400.0;
+
+/// Largest coordinate of a start position, slot or displacement, m (1000 km:
+/// beyond it double precision no longer resolves a vehicle's motion, and
+/// sums of coordinates could overflow).
+pub const MAX_COORD_M: f64 = 1e6;
 
 /// Longest vehicle name (it becomes part of iceoryx2 service names).
 pub const MAX_NAME_LEN: usize = 64;
