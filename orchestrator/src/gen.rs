@@ -1,15 +1,758 @@
-//! `shoal gen`: generates a large-group scenario (formation tree, D_a/D_b,
-//! obstacles to squeeze through) that `shoal check` accepts.
+//! `shoal gen`: generates a large-group scenario — a formation tree whose
+//! followers lead other followers, D_a/D_b assigned so that `shoal check`
+//! accepts it, and obstacles the group must squeeze through — as TOML on
+//! stdout.
+//!
+//! ```text
+//! shoal gen --vehicles 25 --shape grid > gen25.toml
+//! shoal check gen25.toml && shoal run gen25.toml --out /tmp/gen25
+//! ```
+//!
+//! [`generate`] is a pure function of [`GenOptions`]: same options, same
+//! text, byte for byte. What it builds:
+//!
+//! * **Formation** ([`layout`]): files `spacing` apart behind the leader;
+//!   a file's head follows the head of the next file inward diagonally (a
+//!   lateral link that shifts toward its parent's track near obstacles), the
+//!   others the vehicle straight ahead in their file (a rigid link);
+//!   neighbouring files are staggered by half a link. Every parent is in its
+//!   followers' camera view at the start with 5° and 1 m to spare, and the
+//!   tree deepens with N (a level per file outward or per vehicle back).
+//! * **D_a/D_b** from [`planner::formation::assign_displacements`] (the
+//!   function `shoal check` uses) with the safe distance plus
+//!   [`ASSIGN_MARGIN_M`] (falling back to the bare safe distance), written
+//!   into every follower, so that the displacement trajectories keep the
+//!   vehicles apart with room for tracking error.
+//! * **Obstacles**: gates of two walls across the route. The gap is narrower
+//!   than the group (its walls' faces lie on the outermost files' track,
+//!   which must shift inward) but leaves the other files `D_min + 2 m` of
+//!   clearance, so the shifted formation passes with the safe distance; the walls reach past the
+//!   outermost file so no one passes outside. Gates are spaced so the whole
+//!   group has passed one and closed up before the next.
+//! * **Timing**: the followers remember obstacle points (and keep their
+//!   shift) until the followers behind them have passed too
+//!   (`follower.memory_behind_m`); the mission ends far enough past the
+//!   last gate for the group to re-form, and the duration covers the leader's
+//!   arrival plus a settled stretch.
+//!
+//! The seed sets the scenario's `seed` (sensor noise) and jitters where the
+//! gates stand and how long their walls are.
+
+mod layout;
+#[cfg(test)]
+mod tests;
+
+use std::fmt::Write as _;
+
+use camera_pose::CameraConfig;
+use planner::formation::{FollowerSlot, FormationParams};
+
+pub use layout::{Lattice, Member};
+
+/// Most vehicles a scenario can hold (the world snapshot's size).
+pub const MAX_VEHICLES: usize = ipc_types::MAX_VEHICLES;
+/// Most obstacles `--obstacles` accepts (each pair is a gate along the route).
+pub const MAX_OBSTACLES: usize = 16;
+/// The safe distance written into `[safety]` (the paper's 2 m), m.
+pub const SAFE_DISTANCE_M: f64 = 2.0;
+/// Extra separation the generator asks of the displacement trajectories
+/// beyond the safe distance, for tracking error, m.
+pub const ASSIGN_MARGIN_M: f64 = 0.5;
+/// Groups up to this size (the paper's five) are first assigned with
+/// [`ASSIGN_MARGIN_M`]; for most larger ones the assignment's search runs
+/// out of budget before it finds one (measured: from 6 vehicles on, except
+/// V shapes), and a search that fails costs ~0.5 s, so they go straight to
+/// the safe distance.
+pub const MARGIN_MAX_VEHICLES: usize = 5;
+/// Largest clearance of the innermost unshifted file from a gate's wall
+/// beyond the safe distance, m (so that its sonar's `min δ` stays clear of
+/// `D_min`). The margin is `min(this, spacing − D_min)`: with the default
+/// 4 m spacing the wall's face lies on the next file's track, which must
+/// shift inward by half the spacing (λ = 0.5) to keep `D_min` from it.
+pub const GATE_CLEAR_MARGIN_M: f64 = 2.0;
+/// The followers' MPC heading weight, as a multiple of the mpc default.
+pub const YAW_WEIGHT_FACTOR: f64 = 5.0;
+/// How far the walls reach past the outermost file, m.
+pub const WALL_OVERHANG_M: f64 = 6.0;
+/// Mission speed, m/s (the paper's).
+pub const SPEED_MPS: f64 = 1.0;
+/// Leader's speed ramp, m/s² (as the paper scenario).
+pub const ACCEL_MPS2: f64 = 0.05;
+
+/// The formation's shape.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum Shape {
+    /// A filled wedge: tree level d holds 2d + 1 vehicles (file c's head at
+    /// level |c|). The shallowest tree for N; the default.
+    Triangle,
+    /// Two arms of files: each file's head and `round(√(N/8))` − 1 vehicles
+    /// behind it (the paper's "triangle" of five is a V of heads only).
+    V,
+    /// Three files (port, centre, starboard) behind the leader, as long as
+    /// N needs.
+    Column,
+    /// A wedge front, then `2k + 1` files with `k = round(√N / 2.5)`.
+    Grid,
+}
+
+impl Shape {
+    /// Lower-case name, as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Shape::Triangle => "triangle",
+            Shape::V => "v",
+            Shape::Column => "column",
+            Shape::Grid => "grid",
+        }
+    }
+}
+
+/// How many obstacles to place.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ObstacleCount {
+    /// One gate of two walls (the paper's narrow passage).
+    Auto,
+    /// K walls: K/2 gates, and a single port-side wall if K is odd.
+    Count(usize),
+}
+
+impl std::str::FromStr for ObstacleCount {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if s.eq_ignore_ascii_case("auto") {
+            return Ok(ObstacleCount::Auto);
+        }
+        s.parse::<usize>()
+            .map(ObstacleCount::Count)
+            .map_err(|_| format!("`{s}` is neither `auto` nor a count of obstacles"))
+    }
+}
+
+impl std::fmt::Display for ObstacleCount {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ObstacleCount::Auto => write!(f, "auto"),
+            ObstacleCount::Count(k) => write!(f, "{k}"),
+        }
+    }
+}
 
 /// Arguments of `shoal gen`.
 #[derive(Debug, clap::Args)]
+#[command(
+    long_about = "Generate a large-group scenario on stdout: a formation tree whose every parent \
+                  is in its followers' camera view at the start, followers leading followers \
+                  (the tree deepens with N), D_a/D_b assigned so that \
+                  `shoal check` accepts it, and gates of walls the group must squeeze through. \
+                  Same options, same file.\n\nExample: shoal gen --vehicles 25 --shape grid > \
+                  gen25.toml && shoal run gen25.toml"
+)]
 pub struct GenCmd {
-    /// Number of vehicles, leader included.
+    /// Number of vehicles, leader included (2 to 256).
     #[arg(long, default_value_t = 25)]
     pub vehicles: usize,
+    /// Formation shape: triangle (filled wedge, shallowest tree), v (two
+    /// arms), column (three files), grid (wedge front, then 2k+1 files).
+    #[arg(long, value_enum, default_value_t = Shape::Triangle)]
+    pub shape: Shape,
+    /// Distance between neighbouring files, m. A file's head is 2 × that
+    /// ahead-and-across from its parent (more if the camera needs it); the
+    /// others two thirds of that behind theirs. 3 to 4.5 with the default
+    /// camera.
+    #[arg(long, default_value_t = 4.0)]
+    pub spacing: f64,
+    /// Seed: the scenario's noise seed, and the jitter of gate positions and
+    /// wall lengths.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Obstacles: `auto` (one gate of two walls) or a count K (K/2 gates along
+    /// the route, plus one port-side wall if K is odd; 0 = open water).
+    #[arg(long, default_value = "auto")]
+    pub obstacles: ObstacleCount,
+    /// Scenario name (default `gen-<shape>-<N>-s<seed>`).
+    #[arg(long)]
+    pub name: Option<String>,
 }
 
-/// Runs `shoal gen`.
-pub fn run(_cmd: GenCmd) -> anyhow::Result<()> {
-    anyhow::bail!("shoal gen is not implemented yet")
+/// What to generate (the pure form of [`GenCmd`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GenOptions {
+    /// Vehicles, leader included.
+    pub vehicles: usize,
+    /// Shape.
+    pub shape: Shape,
+    /// File spacing, m.
+    pub spacing_m: f64,
+    /// Seed.
+    pub seed: u64,
+    /// Obstacles.
+    pub obstacles: ObstacleCount,
+    /// Scenario name (`None`: `gen-<shape>-<N>-s<seed>`).
+    pub name: Option<String>,
+}
+
+impl Default for GenOptions {
+    fn default() -> Self {
+        Self {
+            vehicles: 25,
+            shape: Shape::Triangle,
+            spacing_m: 4.0,
+            seed: 0,
+            obstacles: ObstacleCount::Auto,
+            name: None,
+        }
+    }
+}
+
+impl From<&GenCmd> for GenOptions {
+    fn from(c: &GenCmd) -> Self {
+        Self {
+            vehicles: c.vehicles,
+            shape: c.shape,
+            spacing_m: c.spacing,
+            seed: c.seed,
+            obstacles: c.obstacles,
+            name: c.name.clone(),
+        }
+    }
+}
+
+/// Why a scenario cannot be generated.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GenError {
+    /// More vehicles than the world snapshot holds.
+    #[error("--vehicles {requested}: at most {max} vehicles fit in a run (ipc_types::MAX_VEHICLES, the world snapshot's size)")]
+    TooManyVehicles {
+        /// Asked for.
+        requested: usize,
+        /// The limit.
+        max: usize,
+    },
+    /// Fewer than a leader and one follower.
+    #[error("--vehicles {0}: a formation needs at least 2 vehicles (a leader and a follower)")]
+    TooFewVehicles(usize),
+    /// The spacing does not fit the camera or the safe distance.
+    #[error("--spacing {spacing_m}: {reason}")]
+    Spacing {
+        /// Asked for, m.
+        spacing_m: f64,
+        /// Why not.
+        reason: String,
+    },
+    /// Too many obstacles.
+    #[error("--obstacles {requested}: at most {max}")]
+    TooManyObstacles {
+        /// Asked for.
+        requested: usize,
+        /// The limit.
+        max: usize,
+    },
+    /// A name a scenario cannot have.
+    #[error("--name `{0}`: must be 1 to 64 of [A-Za-z0-9_.-], not starting with `.`")]
+    Name(String),
+    /// No D_a/D_b keeps the formation safe.
+    #[error("no displacement trajectories keep this formation safe: {0}")]
+    Formation(String),
+    /// A bug in the generator.
+    #[error("internal: {0}")]
+    Internal(String),
+}
+
+/// One gate across the route: walls on one or both sides of a gap.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Gate {
+    /// Distance of the walls' front faces ahead of the leader's start, m.
+    pub start_m: f64,
+    /// Wall length along the route, m.
+    pub length_m: f64,
+    /// Half the gap: the walls' inner faces are this far either side of the
+    /// leader's track, m.
+    pub half_gap_m: f64,
+    /// Each wall's half-thickness across the route, m.
+    pub wall_half_width_m: f64,
+    /// A starboard wall as well as the port one.
+    pub starboard: bool,
+}
+
+/// Everything the file says, before it is written out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// The options it was made from.
+    pub opts: GenOptions,
+    /// Scenario name.
+    pub name: String,
+    /// The lattice.
+    pub lattice: Lattice,
+    /// Vehicles, leader first.
+    pub members: Vec<Member>,
+    /// `(D_a, D_b)` of each follower (member 1 onward), m.
+    pub displacements: Vec<(f64, f64)>,
+    /// The separation the displacements were assigned for, m.
+    pub assigned_for_m: f64,
+    /// Leader's start depth, m.
+    pub depth_m: f64,
+    /// Largest upward / downward accumulated vertical shift of any vehicle
+    /// when every follower is fully shifted, m.
+    pub shift_up_m: f64,
+    /// See `shift_up_m`.
+    pub shift_down_m: f64,
+    /// Gates along the route (north from the leader's start).
+    pub gates: Vec<Gate>,
+    /// Leader's goal, m north of its start.
+    pub goal_m: f64,
+    /// Simulated duration, s.
+    pub duration_s: f64,
+    /// `follower.memory_behind_m`.
+    pub memory_behind_m: f64,
+    /// `follower.memory_max_age_s`.
+    pub memory_max_age_s: f64,
+}
+
+/// SplitMix64: a small deterministic generator for the seed's jitter.
+#[derive(Debug, Clone)]
+struct SplitMix(u64);
+
+impl SplitMix {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+fn valid_name(s: &str) -> bool {
+    !s.is_empty()
+        && s.len() <= 64
+        && !s.starts_with('.')
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
+}
+
+/// Rounds to a millimetre (keeps the file short and stable).
+fn mm(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
+/// D_a/D_b for the formation from the check's own assignment
+/// ([`planner::formation::assign_displacements`]), asked for the safe
+/// distance plus [`ASSIGN_MARGIN_M`] first if `with_margin`, then for the
+/// safe distance; returns them with the separation they keep.
+fn assign(
+    members: &[Member],
+    with_margin: bool,
+) -> Result<(Vec<(f64, f64)>, f64), planner::formation::FormationError> {
+    let slots: Vec<FollowerSlot> = members
+        .iter()
+        .filter_map(|m| {
+            Some(FollowerSlot {
+                name: m.name.clone(),
+                parent: members[m.parent?].name.clone(),
+                slot_in_parent_m: m.slot_m?,
+            })
+        })
+        .collect();
+    let params = FormationParams {
+        visibility_range_m: CameraConfig::default().visibility_range_m,
+        ..Default::default()
+    };
+    let leader = members[0].name.as_str();
+    if with_margin {
+        let sep = SAFE_DISTANCE_M + ASSIGN_MARGIN_M;
+        if let Ok(d) = planner::formation::assign_displacements(leader, &slots, sep, &params) {
+            return Ok((d, sep));
+        }
+    }
+    planner::formation::assign_displacements(leader, &slots, SAFE_DISTANCE_M, &params)
+        .map(|d| (d, SAFE_DISTANCE_M))
+}
+
+/// Plans the scenario (everything but the text).
+pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
+    let n = opts.vehicles;
+    if n > MAX_VEHICLES {
+        return Err(GenError::TooManyVehicles {
+            requested: n,
+            max: MAX_VEHICLES,
+        });
+    }
+    if n < 2 {
+        return Err(GenError::TooFewVehicles(n));
+    }
+    let walls = match opts.obstacles {
+        ObstacleCount::Auto => 2,
+        ObstacleCount::Count(k) if k > MAX_OBSTACLES => {
+            return Err(GenError::TooManyObstacles {
+                requested: k,
+                max: MAX_OBSTACLES,
+            })
+        }
+        ObstacleCount::Count(k) => k,
+    };
+    let name = match &opts.name {
+        Some(s) if valid_name(s) => s.clone(),
+        Some(s) => return Err(GenError::Name(s.clone())),
+        None => format!("gen-{}-{n}-s{}", opts.shape.name(), opts.seed),
+    };
+    // The tightest lattice the camera allows first; if no D_a/D_b keeps that
+    // one safe (close files leave the displacements little room), longer
+    // links, up to what the visibility range allows.
+    let tightest = layout::lattice(opts.spacing_m)?;
+    let mut failure = String::new();
+    let mut found = None;
+    let mut diag_m = tightest.diag_m;
+    while diag_m <= layout::max_row_m() + 1e-9 {
+        let lattice = Lattice {
+            diag_m,
+            row_m: diag_m * 2.0 / 3.0,
+            col_m: tightest.col_m,
+        };
+        let members = layout::members(opts.shape, n, lattice)?;
+        match assign(&members, n <= MARGIN_MAX_VEHICLES) {
+            Ok((d, sep)) => {
+                found = Some((lattice, members, d, sep));
+                break;
+            }
+            Err(e) => failure = format!("with lateral links {diag_m} m long: {e}"),
+        }
+        diag_m += 1.5;
+    }
+    let Some((lattice, members, displacements, assigned_for_m)) = found else {
+        return Err(GenError::Formation(failure));
+    };
+
+    // Vertical shifts accumulate down the tree (each follower's slot is in
+    // its parent's frame): start deep enough that no one surfaces.
+    let mut up = vec![0.0f64; n];
+    let mut down = vec![0.0f64; n];
+    for i in 1..n {
+        let p = members[i]
+            .parent
+            .ok_or_else(|| GenError::Internal("orphan".into()))?;
+        let db = displacements[i - 1].1 / 2.0;
+        up[i] = up[p] + (-db).max(0.0);
+        down[i] = down[p] + db.max(0.0);
+    }
+    let shift_up_m = up.iter().copied().fold(0.0, f64::max);
+    let shift_down_m = down.iter().copied().fold(0.0, f64::max);
+    let depth_m = (6.0 + shift_up_m).max(10.0).ceil();
+
+    let mut rng = SplitMix(opts.seed ^ 0x5348_4F41_4C47_454E);
+    let group_len = members.iter().map(|m| -m.pos_m[0]).fold(0.0, f64::max);
+    let c_max = members.iter().map(|m| m.col.abs()).max().unwrap_or(0);
+    // The outermost file shifts; the others pass as they are.
+    let c_in = (c_max - 1).max(0);
+    let margin = GATE_CLEAR_MARGIN_M.min(lattice.col_m - SAFE_DISTANCE_M);
+    let half_gap_m = c_in as f64 * lattice.col_m + SAFE_DISTANCE_M + margin;
+    let outer = c_max as f64 * lattice.col_m;
+    let wall_half_width_m = mm(((outer + WALL_OVERHANG_M - half_gap_m) / 2.0).max(3.0));
+
+    // The shifting heads keep an obstacle in mind (and their shift) until
+    // the followers behind them have passed it too.
+    let reach = layout::reach_behind(&members);
+    let d_a_max = displacements.iter().map(|d| d.0.abs()).fold(0.0, f64::max);
+    let shifting_reach = members
+        .iter()
+        .zip(&reach)
+        .filter(|(m, _)| m.col.abs() > c_in && m.slot_m.is_some_and(|s| s[1] != 0.0))
+        .map(|(_, r)| *r)
+        .fold(0.0, f64::max);
+    let memory_behind_m = mm((shifting_reach + d_a_max / 2.0 + 3.0).max(12.0));
+
+    let between = group_len + memory_behind_m + 40.0;
+    let mut gates = Vec::new();
+    let mut at = 55.0 + 10.0 * rng.unit();
+    let mut max_len = 0.0f64;
+    for g in 0..walls.div_ceil(2) {
+        let length_m = mm(16.0 + 8.0 * rng.unit());
+        max_len = max_len.max(length_m);
+        gates.push(Gate {
+            start_m: mm(at),
+            length_m,
+            half_gap_m,
+            wall_half_width_m,
+            starboard: 2 * g + 1 < walls,
+        });
+        at += length_m + between + 10.0 * rng.unit();
+    }
+    let last_end = gates.last().map_or(40.0, |g: &Gate| g.start_m + g.length_m);
+    let goal_m = mm(last_end + group_len + memory_behind_m + 40.0).ceil();
+    // Leader: goal at SPEED after a ramp of SPEED/ACCEL (costs half of it),
+    // a taper into the goal (about the same), then 40 s of settled formation.
+    let ramp_s = SPEED_MPS / ACCEL_MPS2;
+    let duration_s = ((goal_m / SPEED_MPS + ramp_s + 40.0) / 10.0).ceil() * 10.0;
+    let memory_max_age_s =
+        (((memory_behind_m + max_len + 20.0) / SPEED_MPS * 1.5).max(60.0)).ceil();
+
+    Ok(Plan {
+        opts: opts.clone(),
+        name,
+        lattice,
+        members,
+        displacements,
+        assigned_for_m,
+        depth_m,
+        shift_up_m,
+        shift_down_m,
+        gates,
+        goal_m,
+        duration_s,
+        memory_behind_m,
+        memory_max_age_s,
+    })
+}
+
+/// Generates the scenario TOML for `opts`: deterministic, and accepted by
+/// `shoal check`.
+pub fn generate(opts: &GenOptions) -> Result<String, GenError> {
+    let p = plan(opts)?;
+    render(&p).map_err(|e| GenError::Internal(format!("formatting: {e}")))
+}
+
+/// A float as TOML (always with a decimal point).
+fn num(x: f64) -> String {
+    format!("{:?}", mm(x) + 0.0)
+}
+
+fn vec3(v: [f64; 3]) -> String {
+    format!("[{}, {}, {}]", num(v[0]), num(v[1]), num(v[2]))
+}
+
+/// Writes the plan as scenario TOML.
+fn render(p: &Plan) -> Result<String, std::fmt::Error> {
+    let o = &p.opts;
+    let n = p.members.len();
+    let depth = p.members.iter().map(|m| m.depth).max().unwrap_or(0);
+    let span = p.members.iter().map(|m| -m.pos_m[0]).fold(0.0, f64::max);
+    let files = {
+        let mut c: Vec<i64> = p.members.iter().map(|m| m.col).collect();
+        c.sort_unstable();
+        c.dedup();
+        c.len()
+    };
+    let mut t = String::new();
+    writeln!(
+        t,
+        "# Generated by `shoal gen --vehicles {n} --shape {} --spacing {} --seed {} --obstacles {}{}`",
+        o.shape.name(),
+        o.spacing_m,
+        o.seed,
+        o.obstacles,
+        o.name
+            .as_ref()
+            .map(|s| format!(" --name {s}"))
+            .unwrap_or_default()
+    )?;
+    writeln!(
+        t,
+        "# (shoal {}). The same options give the same file.",
+        env!("CARGO_PKG_VERSION")
+    )?;
+    writeln!(t, "#")?;
+    writeln!(
+        t,
+        "# Formation: {} of {n} AUVs in {files} files {} m apart, heading north. A file's head follows",
+        o.shape.name(),
+        p.lattice.col_m
+    )?;
+    writeln!(
+        t,
+        "# the head of the next file inward, {} m ahead and one file across (a lateral link: it shifts",
+        p.lattice.diag_m
+    )?;
+    writeln!(
+        t,
+        "# toward its parent's track near obstacles, eqs. 4-8); the others follow the vehicle {} m",
+        p.lattice.row_m
+    )?;
+    writeln!(
+        t,
+        "# straight ahead in their file, so neighbouring files are staggered by half of that. The tree"
+    )?;
+    writeln!(
+        t,
+        "# is {depth} deep and the group {} m long, past one camera's {} m visibility. At the start every",
+        num(span),
+        CameraConfig::default().visibility_range_m
+    )?;
+    writeln!(
+        t,
+        "# parent's beacons are inside its followers' images with {}° and {} m to spare. D_a/D_b:",
+        layout::FOV_MARGIN_DEG,
+        layout::RANGE_MARGIN_M
+    )?;
+    writeln!(
+        t,
+        "# planner::formation (as `shoal check`) for a separation of {} m (safe distance {} m); fully",
+        p.assigned_for_m, SAFE_DISTANCE_M
+    )?;
+    writeln!(
+        t,
+        "# shifted, the deepest vehicle sits {} m higher / {} m lower than the leader; start depth {} m.",
+        num(p.shift_up_m),
+        num(p.shift_down_m),
+        p.depth_m
+    )?;
+    writeln!(t, "#")?;
+    if p.gates.is_empty() {
+        writeln!(t, "# Obstacles: none (open water).")?;
+    } else {
+        writeln!(
+            t,
+            "# Obstacles: {} gate(s). Each gap leaves the inner files {} m from the walls (no shift)",
+            p.gates.len(),
+            num(p.gates[0].half_gap_m
+                - p.members
+                    .iter()
+                    .map(|m| m.pos_m[1].abs())
+                    .filter(|y| *y < p.gates[0].half_gap_m)
+                    .fold(0.0, f64::max))
+        )?;
+        writeln!(
+            t,
+            "# and is {} m wide: the walls' faces lie on or inside the outer file(s)' track, so they",
+            num(2.0 * p.gates[0].half_gap_m)
+        )?;
+        writeln!(
+            t,
+            "# must shift inward (toward their parent's track) to pass. The walls reach {} m past",
+            WALL_OVERHANG_M
+        )?;
+        writeln!(
+            t,
+            "# the outermost file (no one passes outside). Followers remember obstacle points until they"
+        )?;
+        writeln!(
+            t,
+            "# are {} m behind (the farthest follower behind a shifting one, + D_a/2 + 3 m).",
+            p.memory_behind_m
+        )?;
+    }
+    writeln!(
+        t,
+        "# Mission: north to {} m at {} m/s; {} s covers the leader's arrival and a settled stretch.",
+        p.goal_m, SPEED_MPS, p.duration_s
+    )?;
+    writeln!(t, "#")?;
+    writeln!(
+        t,
+        "# Slots are [x forward, y starboard, z down] in the parent's body frame."
+    )?;
+    writeln!(t)?;
+    writeln!(t, "name = \"{}\"", p.name)?;
+    writeln!(
+        t,
+        "description = \"Generated: {} of {n} AUVs through {} gate(s) (shoal gen, seed {})\"",
+        o.shape.name(),
+        p.gates.len(),
+        o.seed
+    )?;
+    writeln!(t, "seed = {}", o.seed)?;
+    writeln!(t, "duration_s = {}", num(p.duration_s))?;
+    writeln!(t)?;
+    writeln!(t, "[safety]")?;
+    writeln!(t, "safe_distance_m = {}", num(SAFE_DISTANCE_M))?;
+    writeln!(t, "collision_distance_m = 0.8")?;
+    writeln!(t)?;
+    writeln!(t, "[camera]")?;
+    writeln!(
+        t,
+        "visibility_range_m = {}",
+        num(CameraConfig::default().visibility_range_m)
+    )?;
+    writeln!(t)?;
+    writeln!(t, "[mission]")?;
+    writeln!(
+        t,
+        "waypoints_ned_m = [{}]",
+        vec3([p.goal_m, 0.0, p.depth_m])
+    )?;
+    writeln!(t, "speed_mps = {}", num(SPEED_MPS))?;
+    writeln!(t, "accel_mps2 = {}", num(ACCEL_MPS2))?;
+    writeln!(t)?;
+    writeln!(t, "[follower]")?;
+    writeln!(t, "memory_behind_m = {}", num(p.memory_behind_m))?;
+    writeln!(t, "memory_max_age_s = {}", num(p.memory_max_age_s))?;
+    writeln!(
+        t,
+        "# Heading process noise of the vision observer, as the paper scenario."
+    )?;
+    writeln!(t, "yaw_accel_noise_radps2 = 0.002")?;
+    writeln!(t)?;
+    writeln!(t, "[mpc]")?;
+    writeln!(
+        t,
+        "# Heading weight x{YAW_WEIGHT_FACTOR} (the rest as the mpc defaults): a follower's slot hangs on its"
+    )?;
+    writeln!(
+        t,
+        "# parent's heading with a {}-{} m arm, so a heading wobble one level up is a lateral target",
+        p.lattice.row_m,
+        p.lattice.diag_m
+    )?;
+    writeln!(
+        t,
+        "# wobble below; held harder, the wobble does not grow down a deep tree (at the default"
+    )?;
+    writeln!(
+        t,
+        "# weight, the 5th level of a 25-vehicle grid swung its heading 69° and lost its parent)."
+    )?;
+    let mut rho1 = mpc::MpcConfig::default().rho1;
+    rho1[5] *= YAW_WEIGHT_FACTOR;
+    writeln!(
+        t,
+        "rho1 = [{}]",
+        rho1.iter().map(|x| num(*x)).collect::<Vec<_>>().join(", ")
+    )?;
+    for (i, m) in p.members.iter().enumerate() {
+        writeln!(t)?;
+        writeln!(t, "[[vehicles]]")?;
+        writeln!(t, "name = \"{}\"", m.name)?;
+        match (m.parent, m.slot_m) {
+            (Some(parent), Some(slot)) => {
+                writeln!(t, "parent = \"{}\"", p.members[parent].name)?;
+                writeln!(t, "slot_m = {}", vec3(slot))?;
+                let (da, db) = p.displacements[i - 1];
+                writeln!(t, "d_a_m = {}", num(da))?;
+                writeln!(t, "d_b_m = {}", num(db))?;
+            }
+            _ => {
+                writeln!(t, "start_ned_m = {}", vec3([0.0, 0.0, p.depth_m]))?;
+                writeln!(t, "start_yaw_deg = 0.0")?;
+            }
+        }
+    }
+    let z_mid = p.depth_m + (p.shift_down_m - p.shift_up_m) / 2.0;
+    let half_h = (p.shift_up_m + p.shift_down_m) / 2.0 + 10.0;
+    for g in &p.gates {
+        let cx = g.start_m + g.length_m / 2.0;
+        let cy = g.half_gap_m + g.wall_half_width_m;
+        let sides: &[f64] = if g.starboard { &[-1.0, 1.0] } else { &[-1.0] };
+        for &s in sides {
+            writeln!(t)?;
+            writeln!(t, "[[obstacles]]")?;
+            writeln!(t, "kind = \"box\"")?;
+            writeln!(t, "center_ned_m = {}", vec3([cx, s * cy, z_mid]))?;
+            writeln!(
+                t,
+                "half_extents_m = {}",
+                vec3([g.length_m / 2.0, g.wall_half_width_m, half_h])
+            )?;
+            writeln!(t, "yaw_deg = 0.0")?;
+        }
+    }
+    Ok(t)
+}
+
+/// Runs `shoal gen`: prints the scenario on stdout.
+pub fn run(cmd: GenCmd) -> anyhow::Result<()> {
+    let text = generate(&GenOptions::from(&cmd))?;
+    print!("{text}");
+    Ok(())
 }
