@@ -3,6 +3,20 @@
 //! The split is the perception rule: `observe` (simulation of the sensor)
 //! is the only part that touches ground truth; `estimate` sees nothing but
 //! the observation, exactly what goes out on `beacons`.
+//!
+//! The scenario's camera faults for this vehicle (`[[faults]]` with action
+//! `blind` or `drop`, see `shoal_scenario::faults`) act here, by the step's
+//! simulated time, in lockstep and in realtime alike:
+//! - **blind**: the frame sees no beacon. `beacons` goes out with nothing
+//!   visible and `leader_pose` invalid, exactly as a frame in which the
+//!   parent is out of sight (the follower's planner counts it as a failed
+//!   observation).
+//! - **drop**: each frame is lost with probability `fraction`, drawn from
+//!   the process's seeded RNG (so a lockstep run is reproduced exactly).
+//!   A lost frame publishes nothing at all: no `beacons`, no `leader_pose`.
+//!
+//! With the acoustic-modem baseline the same faults hit the modem's packets:
+//! blind loses every packet, drop each with probability `fraction`.
 
 use anyhow::Context;
 use nalgebra::Matrix6;
@@ -18,6 +32,7 @@ use rand_chacha::ChaCha8Rng;
 use shoal_runtime::convert::{arr, seed_for, world_pose, wxyz};
 use shoal_runtime::ports::Origin;
 use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use shoal_scenario::faults::{Fault, FaultAction};
 use shoal_scenario::Scenario;
 
 /// Where this follower's parent estimate comes from.
@@ -42,6 +57,7 @@ pub struct CameraTask {
     pose_out: Publisher<LeaderPose>,
     world: Option<World>,
     occluders: Vec<Capsule>,
+    faults: CameraFaults,
 }
 
 impl CameraTask {
@@ -90,6 +106,7 @@ impl CameraTask {
             pose_out: rt.publisher(&ipc_types::service_name(run, me, Channel::LeaderPose), &lim)?,
             world: None,
             occluders: Vec::with_capacity(scenario.vehicles.len()),
+            faults: CameraFaults::new(&scenario.faults, me),
         })
     }
 
@@ -123,6 +140,9 @@ impl Task for CameraTask {
             let now = shoal_runtime::mono_ns();
             let packet = modem.step(ctx.sim_time_s(), now, &truth, &mut self.rng);
             let cov = modem.covariance();
+            // Decided only when a packet arrives: a fault loses packets, not silence.
+            let packet = packet
+                .filter(|_| self.faults.frame(ctx.sim_time_s(), &mut self.rng) == FrameFault::None);
             // A modem delivers packets, not frames: between packets there is
             // nothing to publish (an invalid sample would read as a failed
             // observation and break the follower's reacquisition streak).
@@ -136,7 +156,19 @@ impl Task for CameraTask {
             }
             return Ok(());
         }
-        let obs = self.observe(&w);
+        let fault = self.faults.frame(ctx.sim_time_s(), &mut self.rng);
+        if fault == FrameFault::Lost {
+            // A lost frame: nothing was captured, so nothing is published.
+            return Ok(());
+        }
+        let mut obs = self.observe(&w);
+        if fault == FrameFault::Blind {
+            // The beacons are there but the camera sees none of them.
+            obs = BeaconObservation {
+                count: obs.count,
+                ..BeaconObservation::default()
+            };
+        }
         let origin = Origin::of(&w.header);
         let mut b = Beacons::zeroed();
         for i in 0..obs.count.min(ipc_types::MAX_BEACONS) {
@@ -208,4 +240,238 @@ fn invalid_pose(beacons_used: usize) -> LeaderPose {
     p.q_parent_to_body_wxyz = [1.0, 0.0, 0.0, 0.0];
     p.beacons_used = beacons_used.min(255) as u8;
     p
+}
+
+/// What a camera fault does to one frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FrameFault {
+    /// No fault: the frame is taken as usual.
+    None,
+    /// The frame sees no beacon (a blind window).
+    Blind,
+    /// The frame is lost (a drop window): nothing is published.
+    Lost,
+}
+
+/// One `blind` or `drop` window of this vehicle's camera.
+#[derive(Debug, Clone)]
+struct FaultWindow {
+    /// The scenario's entry (action, `from_s`, `to_s`, `fraction`).
+    fault: Fault,
+    /// Its index in `[[faults]]`, for the log.
+    index: usize,
+    /// Whether the previous frame was inside the window (to log its edges).
+    active: bool,
+}
+
+/// The scenario's camera faults of one vehicle, decided frame by frame.
+///
+/// Windows are `[from_s, to_s)` of simulated time. When a blind and a drop
+/// window overlap, the drop is drawn first: a lost frame is lost whether or
+/// not the camera would have seen anything. The RNG is drawn once per frame
+/// inside a drop window and never outside one, so a run without faults
+/// keeps its random sequence.
+#[derive(Debug, Clone)]
+struct CameraFaults {
+    vehicle: String,
+    windows: Vec<FaultWindow>,
+}
+
+impl CameraFaults {
+    /// The `blind` and `drop` entries of `faults` that name `vehicle`.
+    fn new(faults: &[Fault], vehicle: &str) -> Self {
+        let windows: Vec<FaultWindow> = faults
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| {
+                matches!(f.action, FaultAction::Blind | FaultAction::Drop) && f.vehicle == vehicle
+            })
+            .map(|(index, f)| FaultWindow {
+                fault: f.clone(),
+                index,
+                active: false,
+            })
+            .collect();
+        for w in &windows {
+            tracing::info!(
+                fault = w.index,
+                action = ?w.fault.action,
+                from_s = w.fault.from_s,
+                to_s = w.fault.to_s,
+                fraction = w.fault.fraction,
+                "camera fault scheduled"
+            );
+        }
+        Self {
+            vehicle: vehicle.to_string(),
+            windows,
+        }
+    }
+
+    /// The fault of the frame taken at `t_s` (simulated time), logging each
+    /// window as the first frame inside it and the first frame after it
+    /// arrive.
+    fn frame<R: rand::Rng>(&mut self, t_s: f64, rng: &mut R) -> FrameFault {
+        let mut lost = false;
+        let mut blind = false;
+        for w in &mut self.windows {
+            let active = w.fault.camera_active(&self.vehicle, t_s);
+            if active != w.active {
+                w.active = active;
+                if active {
+                    tracing::info!(fault = w.index, action = ?w.fault.action, t_s, "camera fault starts");
+                } else {
+                    tracing::info!(fault = w.index, action = ?w.fault.action, t_s, "camera fault ends");
+                }
+            }
+            if !active {
+                continue;
+            }
+            match w.fault.action {
+                FaultAction::Drop => {
+                    let p = w.fault.fraction.unwrap_or(0.0);
+                    // One draw per drop window per frame, whatever the outcome.
+                    if rng.random::<f64>() < p {
+                        lost = true;
+                    }
+                }
+                FaultAction::Blind => blind = true,
+                FaultAction::Kill | FaultAction::Stall => {}
+            }
+        }
+        if lost {
+            FrameFault::Lost
+        } else if blind {
+            FrameFault::Blind
+        } else {
+            FrameFault::None
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::Rng;
+
+    fn fault(action: FaultAction, vehicle: &str, from_s: f64, to_s: f64, p: f64) -> Fault {
+        Fault {
+            action,
+            vehicle: vehicle.into(),
+            process: None,
+            at_s: None,
+            duration_s: None,
+            from_s: Some(from_s),
+            to_s: Some(to_s),
+            fraction: (action == FaultAction::Drop).then_some(p),
+        }
+    }
+
+    fn rng() -> ChaCha8Rng {
+        ChaCha8Rng::seed_from_u64(7)
+    }
+
+    #[test]
+    fn blind_window_covers_from_inclusive_to_exclusive() {
+        let mut f = CameraFaults::new(&[fault(FaultAction::Blind, "F4", 60.0, 70.0, 0.0)], "F4");
+        let mut r = rng();
+        assert_eq!(f.frame(59.9, &mut r), FrameFault::None);
+        assert_eq!(f.frame(60.0, &mut r), FrameFault::Blind);
+        assert_eq!(f.frame(65.0, &mut r), FrameFault::Blind);
+        assert_eq!(f.frame(69.9, &mut r), FrameFault::Blind);
+        assert_eq!(f.frame(70.0, &mut r), FrameFault::None);
+        assert_eq!(f.frame(80.0, &mut r), FrameFault::None);
+    }
+
+    #[test]
+    fn faults_of_other_vehicles_and_processes_are_ignored() {
+        let kill = Fault {
+            action: FaultAction::Kill,
+            vehicle: "F4".into(),
+            process: Some("camera-pose".into()),
+            at_s: Some(1.0),
+            duration_s: None,
+            from_s: None,
+            to_s: None,
+            fraction: None,
+        };
+        let mut f = CameraFaults::new(
+            &[
+                fault(FaultAction::Blind, "F3", 0.0, 100.0, 0.0),
+                fault(FaultAction::Drop, "F2", 0.0, 100.0, 1.0),
+                kill,
+            ],
+            "F4",
+        );
+        assert!(f.windows.is_empty());
+        let mut r = rng();
+        for i in 0..100 {
+            assert_eq!(f.frame(f64::from(i), &mut r), FrameFault::None);
+        }
+    }
+
+    #[test]
+    fn drop_loses_about_fraction_of_the_frames_and_nothing_outside() {
+        let p = 0.3;
+        let mut f = CameraFaults::new(&[fault(FaultAction::Drop, "F2", 50.0, 1050.0, p)], "F2");
+        let mut r = rng();
+        // 10 000 frames at 10 Hz inside the window.
+        let n = 10_000;
+        let lost = (0..n)
+            .filter(|i| f.frame(50.0 + f64::from(*i) * 0.1, &mut r) == FrameFault::Lost)
+            .count();
+        let share = lost as f64 / f64::from(n);
+        // Binomial: σ = sqrt(p(1−p)/n) ≈ 0.0046; 5σ.
+        let sigma = (p * (1.0 - p) / f64::from(n)).sqrt();
+        assert!((share - p).abs() < 5.0 * sigma, "lost {share}");
+        // Outside the window nothing is lost, and the RNG is not drawn.
+        let mut before = rng();
+        let mut probe = rng();
+        assert_eq!(f.frame(49.9, &mut before), FrameFault::None);
+        assert_eq!(f.frame(1050.0, &mut before), FrameFault::None);
+        assert_eq!(before.random::<u64>(), probe.random::<u64>());
+    }
+
+    #[test]
+    fn drop_decisions_repeat_with_the_same_seed() {
+        let run = || {
+            let mut f = CameraFaults::new(&[fault(FaultAction::Drop, "F2", 0.0, 10.0, 0.5)], "F2");
+            let mut r = rng();
+            (0..100)
+                .map(|i| f.frame(f64::from(i) * 0.1, &mut r))
+                .collect::<Vec<_>>()
+        };
+        let a = run();
+        assert_eq!(a, run());
+        assert!(a.contains(&FrameFault::Lost) && a.contains(&FrameFault::None));
+    }
+
+    #[test]
+    fn drop_fractions_zero_and_one_are_exact() {
+        let mut r = rng();
+        let mut never = CameraFaults::new(&[fault(FaultAction::Drop, "F1", 0.0, 10.0, 0.0)], "F1");
+        let mut always = CameraFaults::new(&[fault(FaultAction::Drop, "F1", 0.0, 10.0, 1.0)], "F1");
+        for i in 0..100 {
+            let t = f64::from(i) * 0.1;
+            assert_eq!(never.frame(t, &mut r), FrameFault::None);
+            assert_eq!(always.frame(t, &mut r), FrameFault::Lost);
+        }
+    }
+
+    #[test]
+    fn a_lost_frame_wins_over_a_blind_one_where_windows_overlap() {
+        let mut f = CameraFaults::new(
+            &[
+                fault(FaultAction::Blind, "F1", 0.0, 10.0, 0.0),
+                fault(FaultAction::Drop, "F1", 5.0, 10.0, 1.0),
+            ],
+            "F1",
+        );
+        let mut r = rng();
+        assert_eq!(f.frame(1.0, &mut r), FrameFault::Blind);
+        assert_eq!(f.frame(5.0, &mut r), FrameFault::Lost);
+        assert!(f.windows.iter().all(|w| w.active));
+        assert_eq!(f.frame(10.0, &mut r), FrameFault::None);
+        assert!(f.windows.iter().all(|w| !w.active));
+    }
 }
