@@ -92,3 +92,94 @@ fn sigkill_of_shoal_leaves_a_readable_recording_and_the_next_run_starts_clean() 
         "the dead run's files survived the next run: {left:?}"
     );
 }
+
+fn paper_with(faults: &str) -> String {
+    let paper = std::fs::read_to_string(repo_root().join("scenarios/paper.toml")).unwrap();
+    format!("{paper}\n{faults}\n")
+}
+
+#[test]
+fn a_stalled_process_holds_the_lockstep_clock_and_the_run_goes_on() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = paper_with(
+        "[[faults]]\naction = \"stall\"\nvehicle = \"F1\"\nprocess = \"mpc\"\nat_s = 10.0\nduration_s = 1.5\n",
+    );
+    let scenario = write_scenario(tmp.path(), "stall.toml", &text);
+    let out = tmp.path().join("stall");
+    let start = Instant::now();
+    let o = run_shoal(&[
+        "run",
+        "--quiet",
+        "--duration",
+        "30",
+        "--out",
+        out.to_str().unwrap(),
+        scenario.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        start.elapsed() >= Duration::from_millis(1500),
+        "the stall did not hold the clock"
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let events = s["events"].as_array().unwrap();
+    assert_eq!(events.len(), 1, "{events:?}");
+    assert_eq!(events[0]["action"], "stall");
+    assert_eq!(events[0]["process"], "F1/mpc");
+    assert_eq!(s["safety"]["collisions"], 0);
+    // Lockstep: the stall changes nothing the vehicles do.
+    let plain = tmp.path().join("plain");
+    let o = run_shoal(&[
+        "run",
+        "--quiet",
+        "--duration",
+        "30",
+        "--out",
+        plain.to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    let a = Recording::open(&out.join("recording.mcap")).unwrap();
+    let b = Recording::open(&plain.join("recording.mcap")).unwrap();
+    assert_eq!(
+        a.samples::<ipc_types::Truth>("/F1/truth")
+            .last()
+            .map(|t| t.position_ned_m),
+        b.samples::<ipc_types::Truth>("/F1/truth")
+            .last()
+            .map(|t| t.position_ned_m),
+    );
+}
+
+#[test]
+fn a_killed_process_under_the_abort_policy_stops_the_run_cleanly_with_the_cause() {
+    let tmp = tempfile::tempdir().unwrap();
+    let text = paper_with(
+        "[supervision]\npolicy = \"abort\"\n\n[[faults]]\naction = \"kill\"\nvehicle = \"F3\"\nprocess = \"sonar\"\nat_s = 12.0\n",
+    );
+    let scenario = write_scenario(tmp.path(), "kill.toml", &text);
+    let out = tmp.path().join("kill");
+    let o = run_shoal(&[
+        "run",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+        scenario.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("F3/sonar") && err.contains("SIGKILL"), "{err}");
+    let run_id = serde_json::from_str::<serde_json::Value>(
+        &std::fs::read_to_string(out.join("run.json")).unwrap(),
+    )
+    .unwrap()["run_id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(shoal_runtime::list_domain_files(&run_id).is_empty());
+    assert!(processes_mentioning(&run_id).is_empty());
+    // What was recorded up to the kill reads.
+    let rec = Recording::open(&out.join("recording.mcap")).unwrap();
+    let truth = rec.samples::<ipc_types::Truth>("/F3/truth");
+    assert!(truth.last().unwrap().header.sim_time_ns >= 11_000_000_000);
+}

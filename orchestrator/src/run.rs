@@ -58,6 +58,8 @@ pub struct RunOutcome {
     pub ticks: u64,
     /// Every process's runtime statistics (its exit file).
     pub stats: Vec<shoal_runtime::stats::StatsFile>,
+    /// Injected faults and process deaths, in order.
+    pub events: Vec<serde_json::Value>,
 }
 
 /// Why a run ended early.
@@ -269,6 +271,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         processes: procs.len(),
         ticks,
         stats,
+        events: std::mem::take(&mut sup.events),
     })
 }
 
@@ -298,13 +301,28 @@ fn lockstep(
     let start = Instant::now();
     let mut due: Vec<usize> = Vec::with_capacity(procs.len());
     let mut seq = 0u64;
+    // Kills and stalls, by the tick at which they strike.
+    let mut injections: Vec<(u64, &shoal_scenario::faults::Fault)> = scenario
+        .faults
+        .iter()
+        .filter_map(|f| {
+            let at = f.at_s?;
+            Some(((at / scenario.rates.tick_s).ceil() as u64, f))
+        })
+        .collect();
+    injections.sort_by_key(|(t, _)| *t);
+    let mut next_injection = 0;
     for tick in 0..ticks {
+        let sim = tick * tick_ns;
+        while next_injection < injections.len() && injections[next_injection].0 <= tick {
+            inject(injections[next_injection].1, procs, sup, sim);
+            next_injection += 1;
+        }
         due.clear();
         due.extend(procs.iter().filter(|p| p.due(tick)).map(|p| p.index));
         if due.is_empty() {
             continue;
         }
-        let sim = tick * tick_ns;
         let clock = Clock {
             header: Header {
                 seq,
@@ -341,6 +359,49 @@ fn lockstep(
     Ok((start.elapsed().as_secs_f64(), ticks))
 }
 
+/// Strikes a kill or stall fault (scenario `[[faults]]`) at simulation time `sim_ns`.
+fn inject(
+    fault: &shoal_scenario::faults::Fault,
+    procs: &[ProcessSpec],
+    sup: &mut Supervisor,
+    sim_ns: u64,
+) {
+    use shoal_scenario::faults::FaultAction;
+    let Some(kind) = fault.process_kind() else {
+        return;
+    };
+    let Some(spec) = procs
+        .iter()
+        .find(|p| p.kind == kind && p.vehicle == fault.vehicle)
+    else {
+        return;
+    };
+    let Some(pid) = sup.pid_of(spec.index) else {
+        return;
+    };
+    let action = match fault.action {
+        FaultAction::Kill => {
+            sys::send_signal(pid, libc::SIGKILL);
+            "kill"
+        }
+        FaultAction::Stall => {
+            let d = Duration::from_secs_f64(fault.duration_s.unwrap_or(0.0).max(0.0));
+            sys::send_signal(pid, libc::SIGSTOP);
+            sup.signal_later(pid, libc::SIGCONT, d);
+            "stall"
+        }
+        FaultAction::Drop | FaultAction::Blind => return,
+    };
+    tracing::warn!(process = %spec.label(), action, t_s = sim_ns as f64 * 1e-9, "fault injected");
+    sup.events.push(serde_json::json!({
+        "t_s": sim_ns as f64 * 1e-9,
+        "event": "fault_injected",
+        "action": action,
+        "process": spec.label(),
+        "duration_s": fault.duration_s,
+    }));
+}
+
 fn realtime(
     opts: &RunOptions,
     ports: &mut Ports,
@@ -371,6 +432,13 @@ fn realtime(
             .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
         check_signal(r)?;
         if let Some(d) = sup.reap().into_iter().next() {
+            sup.events.push(serde_json::json!({
+                "t_s": now.saturating_sub(epoch) as f64 * 1e-9,
+                "event": "process_died",
+                "process": d.label,
+                "exit": d.exit.describe(),
+                "policy": "abort",
+            }));
             return Err(RunError::ChildDied(d).into());
         }
         if now > epoch {
@@ -451,6 +519,13 @@ pub(crate) fn wait_done(
             return Err(RunError::Interrupted(sig).into());
         }
         if let Some(d) = sup.reap().into_iter().next() {
+            sup.events.push(serde_json::json!({
+                "t_s": sim_time_s,
+                "event": "process_died",
+                "process": d.label,
+                "exit": d.exit.describe(),
+                "policy": "abort",
+            }));
             return Err(RunError::ChildDied(d).into());
         }
         if start.elapsed() > timeout {

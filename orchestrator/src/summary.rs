@@ -307,6 +307,7 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
         "deadline_misses": runtime.deadline_misses,
         "step_us": runtime.step_us,
         "wake_late_us": runtime.wake_late_us,
+        "events": outcome.events,
         "samples_lost": runtime.lost,
         "samples_rejected": runtime.rejected,
         "mpc": {

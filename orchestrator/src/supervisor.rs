@@ -30,6 +30,10 @@ pub struct Supervisor {
     by_pid: HashMap<i32, usize>,
     /// When set, exits are expected (the run is being stopped).
     stopping: bool,
+    /// Signals to send later: `(when, pid, signal)` (the end of a stall).
+    timers: Vec<(Instant, i32, i32)>,
+    /// What happened to the run's processes: injected faults, deaths.
+    pub events: Vec<serde_json::Value>,
 }
 
 /// A child that ended while the run needed it.
@@ -79,9 +83,32 @@ impl Supervisor {
         &self.children
     }
 
+    /// The live child running process `index` of the run.
+    pub fn pid_of(&self, index: usize) -> Option<i32> {
+        self.children
+            .iter()
+            .rev()
+            .find(|c| c.spec.index == index && c.exit.is_none())
+            .map(|c| c.pid)
+    }
+
+    /// Sends `sig` to `pid` once `after` has passed (checked on every reap).
+    pub fn signal_later(&mut self, pid: i32, sig: i32, after: Duration) {
+        self.timers.push((Instant::now() + after, pid, sig));
+    }
+
     /// Reaps every child that has exited; returns the ones that died while
-    /// the run still needed them.
+    /// the run still needed them. Sends the signals that are due.
     pub fn reap(&mut self) -> Vec<Death> {
+        let now = Instant::now();
+        self.timers.retain(|&(at, pid, sig)| {
+            if at <= now {
+                sys::send_signal(pid, sig);
+                false
+            } else {
+                true
+            }
+        });
         let mut deaths = Vec::new();
         while let Some((pid, info)) = sys::reap_any() {
             if let Some(&i) = self.by_pid.get(&pid) {
@@ -139,6 +166,10 @@ impl Supervisor {
     /// left after the grace period. Every child is reaped.
     pub fn stop_all(&mut self, first: impl Fn(&ChildProc) -> bool + Copy, grace: Duration) {
         self.begin_stop();
+        // A stalled child must run again to stop.
+        for (_, pid, sig) in std::mem::take(&mut self.timers) {
+            sys::send_signal(pid, sig);
+        }
         self.signal(libc::SIGTERM, first);
         if !self.wait_for(grace * 6, first) {
             self.signal(libc::SIGKILL, first);

@@ -433,7 +433,15 @@ impl Runtime {
                 }
             }
         };
-        let result = waitset.wait_and_process(on_event);
+        let mut on_event = on_event;
+        // A signal that is not a termination request (SIGCONT after a
+        // stall, SIGCHLD, ...) interrupts the wait: wait again.
+        let result = loop {
+            match waitset.wait_and_process(&mut on_event) {
+                Ok(iceoryx2::waitset::WaitSetRunResult::Interrupt) => continue,
+                other => break other,
+            }
+        };
         let finish = task.finish();
         if let Some(e) = failure {
             return Err(e);
