@@ -303,6 +303,9 @@ fn cmd_inspect(path: PathBuf, json: bool) -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
+    sys::default_sigpipe();
+    // Children inherit it: a run of many vehicles needs thousands of files.
+    sys::raise_nofile_limit();
     shoal_runtime::init_tracing();
     let cli = Cli::parse();
     let result = match cli.cmd {

@@ -119,3 +119,38 @@ pub fn random_id() -> String {
     }
     buf.iter().map(|b| format!("{b:02x}")).collect()
 }
+
+/// Raises the soft limit of open files to the hard limit (a run of many
+/// vehicles needs thousands: the recorder opens every channel); returns the
+/// new soft limit.
+pub fn raise_nofile_limit() -> u64 {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit/setrlimit read and write the rlimit struct we own.
+    unsafe {
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) != 0 {
+            return 0;
+        }
+        if lim.rlim_cur < lim.rlim_max {
+            let raised = libc::rlimit {
+                rlim_cur: lim.rlim_max,
+                rlim_max: lim.rlim_max,
+            };
+            if libc::setrlimit(libc::RLIMIT_NOFILE, &raised) == 0 {
+                return raised.rlim_cur;
+            }
+        }
+    }
+    lim.rlim_cur
+}
+
+/// Restores the default SIGPIPE action, so `shoal inspect … | head` ends
+/// quietly like any Unix tool instead of failing on a closed pipe.
+pub fn default_sigpipe() {
+    // SAFETY: resetting a signal's disposition to its default has no memory effects.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
