@@ -3,6 +3,7 @@
 //! recordings. See `shoal --help`.
 
 mod bench_ipc;
+mod bench_run;
 mod check;
 mod compare;
 mod export;
@@ -71,6 +72,9 @@ enum Cmd {
 enum BenchCmd {
     /// Ping-pong latency: raw iceoryx2, shoal's runtime, Unix-domain sockets.
     Ipc(bench_ipc::IpcCmd),
+    /// Real-time factor and CPU time of a scenario in lockstep (blocking and
+    /// adaptive waits), end-to-end latency in realtime mode.
+    Run(bench_run::RunBenchCmd),
 }
 
 #[derive(Debug, clap::Args)]
@@ -337,6 +341,7 @@ fn main() -> ExitCode {
         Cmd::Recover(cmd) => recover::run(cmd),
         Cmd::Replay(cmd) => replay::run(cmd),
         Cmd::Bench(BenchCmd::Ipc(cmd)) => bench_ipc::run(cmd),
+        Cmd::Bench(BenchCmd::Run(cmd)) => bench_run::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
