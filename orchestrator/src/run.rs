@@ -144,6 +144,12 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         }
     }
 
+    if scenario.supervision.policy == shoal_scenario::faults::Policy::Restart {
+        bail!(
+            "supervision.policy = \"restart\" is not supported yet: a dead process stops the run \
+             (policy \"abort\"); nothing was started"
+        );
+    }
     // A run that died (SIGKILL, power loss) left its domain behind: remove it.
     for (dead, files) in shoal_runtime::sweep_stale_domains() {
         tracing::warn!(run = %dead, files, "removed the shared memory of a dead run");
