@@ -60,6 +60,61 @@ pub struct ReplayCmd {
     pub json: bool,
 }
 
+/// Evaluates `$body` with `$T` the sample type recorded under `$schema`
+/// (its ros2msg name), or `$other` for a schema shoal does not know.
+macro_rules! with_sample_type {
+    ($schema:expr, $T:ident => $body:expr, else $other:expr) => {{
+        use ipc_types::*;
+        match $schema {
+            "shoal/Truth" => {
+                type $T = Truth;
+                $body
+            }
+            "shoal/Nav" => {
+                type $T = Nav;
+                $body
+            }
+            "shoal/Thrust" => {
+                type $T = Thrust;
+                $body
+            }
+            "shoal/World" => {
+                type $T = World;
+                $body
+            }
+            "shoal/Sonar" => {
+                type $T = Sonar;
+                $body
+            }
+            "shoal/Beacons" => {
+                type $T = Beacons;
+                $body
+            }
+            "shoal/LeaderPose" => {
+                type $T = LeaderPose;
+                $body
+            }
+            "shoal/Setpoint" => {
+                type $T = Setpoint;
+                $body
+            }
+            "shoal/PlannerState" => {
+                type $T = PlannerState;
+                $body
+            }
+            "shoal/MpcStats" => {
+                type $T = MpcStats;
+                $body
+            }
+            "shoal/ProcessStats" => {
+                type $T = ProcessStats;
+                $body
+            }
+            _ => $other,
+        }
+    }};
+}
+
 /// A publisher of any recorded sample type, fed raw recorded bytes.
 trait AnyPublisher {
     fn publish_raw(&mut self, data: &[u8]) -> anyhow::Result<()>;
@@ -110,21 +165,7 @@ fn open_publisher(
             publisher: shoal_runtime::node_publisher::<T>(node, service, limits)?,
         }))
     }
-    use ipc_types::*;
-    match schema {
-        "shoal/Truth" => typed::<Truth>(node, service, limits),
-        "shoal/Nav" => typed::<Nav>(node, service, limits),
-        "shoal/Thrust" => typed::<Thrust>(node, service, limits),
-        "shoal/World" => typed::<World>(node, service, limits),
-        "shoal/Sonar" => typed::<Sonar>(node, service, limits),
-        "shoal/Beacons" => typed::<Beacons>(node, service, limits),
-        "shoal/LeaderPose" => typed::<LeaderPose>(node, service, limits),
-        "shoal/Setpoint" => typed::<Setpoint>(node, service, limits),
-        "shoal/PlannerState" => typed::<PlannerState>(node, service, limits),
-        "shoal/MpcStats" => typed::<MpcStats>(node, service, limits),
-        "shoal/ProcessStats" => typed::<ProcessStats>(node, service, limits),
-        other => bail!("no sample type for schema {other}"),
-    }
+    with_sample_type!(schema, T => typed::<T>(node, service, limits), else bail!("no sample type for schema {schema}"))
 }
 
 /// The recorded run's scenario (resolved, as the processes read it).
@@ -486,20 +527,7 @@ fn open_tap(
             sub: shoal_runtime::node_subscriber::<T>(node, service, limits, limits.max_buffer)?,
         }))
     }
-    use ipc_types::*;
-    match schema {
-        "shoal/Truth" => typed::<Truth>(node, service, limits),
-        "shoal/Nav" => typed::<Nav>(node, service, limits),
-        "shoal/Thrust" => typed::<Thrust>(node, service, limits),
-        "shoal/World" => typed::<World>(node, service, limits),
-        "shoal/Sonar" => typed::<Sonar>(node, service, limits),
-        "shoal/Beacons" => typed::<Beacons>(node, service, limits),
-        "shoal/LeaderPose" => typed::<LeaderPose>(node, service, limits),
-        "shoal/Setpoint" => typed::<Setpoint>(node, service, limits),
-        "shoal/PlannerState" => typed::<PlannerState>(node, service, limits),
-        "shoal/MpcStats" => typed::<MpcStats>(node, service, limits),
-        other => bail!("no sample type for schema {other}"),
-    }
+    with_sample_type!(schema, T => typed::<T>(node, service, limits), else bail!("no sample type for schema {schema}"))
 }
 
 /// Spawns the process, feeds it tick by tick and compares its outputs.
@@ -686,20 +714,7 @@ fn drive(
 
 /// The fields of a recorded schema.
 fn fields_of(schema: &str) -> Option<Vec<FieldDesc>> {
-    use ipc_types::*;
-    Some(match schema {
-        "shoal/Truth" => Truth::fields(),
-        "shoal/Nav" => Nav::fields(),
-        "shoal/Thrust" => Thrust::fields(),
-        "shoal/World" => World::fields(),
-        "shoal/Sonar" => Sonar::fields(),
-        "shoal/Beacons" => Beacons::fields(),
-        "shoal/LeaderPose" => LeaderPose::fields(),
-        "shoal/Setpoint" => Setpoint::fields(),
-        "shoal/PlannerState" => PlannerState::fields(),
-        "shoal/MpcStats" => MpcStats::fields(),
-        _ => return None,
-    })
+    with_sample_type!(schema, T => Some(<T as ipc_types::Described>::fields()), else None)
 }
 
 /// The first field (in declaration order) whose bytes differ between `a`

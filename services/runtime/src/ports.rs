@@ -106,20 +106,53 @@ fn open_pubsub<T: Sample>(
     iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
     RuntimeError,
 > {
-    node.service_builder(&service_name(service)?)
-        .publish_subscribe::<T>()
-        .max_publishers(limits.max_publishers)
-        .max_subscribers(limits.max_subscribers)
-        .max_nodes(limits.max_nodes)
-        .subscriber_max_buffer_size(limits.max_buffer)
-        .history_size(limits.history)
-        .subscriber_max_borrowed_samples(2)
-        .enable_safe_overflow(true)
-        .open_or_create()
-        .map_err(|e| RuntimeError::Service {
-            service: service.to_string(),
-            reason: format!("{e:?}"),
-        })
+    let name = service_name(service)?;
+    // Two processes opening a new service at once race inside
+    // `open_or_create` (one sees it half-created: `DoesNotExist` or
+    // `IsBeingCreatedByAnotherInstance`); a short retry settles it.
+    let mut attempt = 0;
+    loop {
+        let r = node
+            .service_builder(&name)
+            .publish_subscribe::<T>()
+            .max_publishers(limits.max_publishers)
+            .max_subscribers(limits.max_subscribers)
+            .max_nodes(limits.max_nodes)
+            .subscriber_max_buffer_size(limits.max_buffer)
+            .history_size(limits.history)
+            .subscriber_max_borrowed_samples(2)
+            .enable_safe_overflow(true)
+            .open_or_create();
+        match r {
+            Ok(f) => return Ok(f),
+            Err(e) if attempt < OPEN_RETRIES && transient(&format!("{e:?}")) => {
+                attempt += 1;
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
+            Err(e) => {
+                return Err(RuntimeError::Service {
+                    service: service.to_string(),
+                    reason: format!("{e:?}"),
+                })
+            }
+        }
+    }
+}
+
+/// Attempts at opening a service that another process is creating.
+const OPEN_RETRIES: u32 = 200;
+
+/// True for the errors of a service caught half-created by another process.
+fn transient(reason: &str) -> bool {
+    [
+        "DoesNotExist",
+        "IsBeingCreatedByAnotherInstance",
+        "InternalFailure",
+        "AlreadyExists",
+        "ServiceInCorruptedState",
+    ]
+    .iter()
+    .any(|k| reason.contains(k))
 }
 
 /// A publisher of one sample type on one service.
