@@ -235,10 +235,10 @@ fn two_runs_at_once_never_see_each_other() {
     let tmp = tempfile::tempdir().unwrap();
     let a = write_scenario(tmp.path(), "a.toml", &small_scenario("a", 30.0));
     // Same vehicle names, different formation: only service names keep them apart.
-    let b_text = small_scenario("b", 30.0).replace("[-8.0, 4.0, 0.0]", "[-6.0, 5.0, 0.0]");
+    let b_text = small_scenario("b", 30.0).replace("[-8.0, 4.0, 0.0]", "[-9.0, 4.0, 0.0]");
     let b = write_scenario(tmp.path(), "b.toml", &b_text);
     let outs = [tmp.path().join("ra"), tmp.path().join("rb")];
-    let mut children: Vec<_> = [&a, &b]
+    let children: Vec<_> = [&a, &b]
         .iter()
         .zip(&outs)
         .map(|(s, o)| {
@@ -256,9 +256,9 @@ fn two_runs_at_once_never_see_each_other() {
                 .unwrap()
         })
         .collect();
-    for c in &mut children {
-        let o = c.wait().unwrap();
-        assert!(o.success());
+    for c in children {
+        let o = c.wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     }
     let ra = Recording::open(&outs[0].join("recording.mcap")).unwrap();
     let rb = Recording::open(&outs[1].join("recording.mcap")).unwrap();
@@ -267,10 +267,23 @@ fn two_runs_at_once_never_see_each_other() {
         // Every channel exactly once per frame, no gaps: nobody else's samples got in.
         for c in &report.channels {
             assert_eq!(c.gaps, 0, "{name}: {} has gaps", c.topic);
+            if c.topic == "/stats" {
+                continue;
+            }
             assert_eq!(
                 c.messages, 300,
                 "{name}: {} has {} messages",
                 c.topic, c.messages
+            );
+        }
+        // The stats channel: once a second from each of the run's 16 processes, no one else.
+        let stats = rec.samples::<ipc_types::ProcessStats>("/stats");
+        assert_eq!(stats.len(), 16 * 29, "{name}: /stats");
+        for p in &stats {
+            let v = ipc_types::str_of(&p.vehicle);
+            assert!(
+                ["L", "F1", "F2", "run"].contains(&v),
+                "{name}: stats from {v}"
             );
         }
         assert_eq!(rec.metadata()["shoal.run"]["scenario"], name);
@@ -279,7 +292,7 @@ fn two_runs_at_once_never_see_each_other() {
     let fa = ra.samples::<ipc_types::Truth>("/F2/truth")[0].position_ned_m;
     let fb = rb.samples::<ipc_types::Truth>("/F2/truth")[0].position_ned_m;
     assert!(
-        (fa[1] - 4.0).abs() < 1e-6 && (fb[1] - 5.0).abs() < 1e-6,
+        (fa[0] + 8.0).abs() < 1e-6 && (fb[0] + 9.0).abs() < 1e-6,
         "{fa:?} {fb:?}"
     );
 }
@@ -438,7 +451,9 @@ fn followers_planner_and_mpc_open_only_their_own_channels() {
                     .strip_prefix(&prefix)
                     .unwrap_or_else(|| panic!("{node} opened a foreign service {s}"));
                 let own = rest.starts_with(&format!("{follower}/"));
-                let clock = rest == "clock" || rest == "done";
+                // The run's clock and done events, and the stats channel
+                // every process publishes its own runtime statistics on.
+                let clock = rest == "clock" || rest == "done" || rest == "stats";
                 assert!(
                     own || clock,
                     "{node} opened {s}: not its own vehicle's channel"
