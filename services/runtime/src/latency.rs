@@ -84,6 +84,30 @@ impl LatencyRecorder {
             .map_or(0, |h| h.value_at_quantile(q))
     }
 
+    /// Values at several ascending quantiles in one pass over the buckets, ns
+    /// (zeros when empty).
+    pub fn quantiles_ns<const N: usize>(&self, qs: [f64; N]) -> [u64; N] {
+        let mut out = [0u64; N];
+        let Some(h) = self.hist.as_ref().filter(|h| !h.is_empty()) else {
+            return out;
+        };
+        let total = h.len();
+        let targets = qs.map(|q| ((q.clamp(0.0, 1.0) * total as f64).ceil() as u64).max(1));
+        let mut k = 0;
+        let mut seen = 0u64;
+        for v in h.iter_recorded() {
+            seen += v.count_at_value();
+            while k < N && seen >= targets[k] {
+                out[k] = h.highest_equivalent(v.value_iterated_to());
+                k += 1;
+            }
+            if k == N {
+                break;
+            }
+        }
+        out
+    }
+
     /// Largest value, ns (0 when empty).
     pub fn max_ns(&self) -> u64 {
         self.hist.as_ref().map_or(0, |h| h.max())
@@ -120,5 +144,23 @@ mod tests {
         assert_eq!(a.summary(), b.summary());
         assert_eq!(a.max_ns(), b.max_ns());
         assert_eq!(b.quantile_ns(0.5), a.quantile_ns(0.5));
+    }
+
+    #[test]
+    fn one_pass_quantiles_equal_the_histograms_own() {
+        let mut a = LatencyRecorder::new();
+        let mut x = 12345u64;
+        for _ in 0..10_000 {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            a.record_ns(1 + (x >> 40) % 5_000_000);
+        }
+        let qs = [0.5, 0.9, 0.99, 0.999];
+        let got = a.quantiles_ns(qs);
+        for (q, g) in qs.iter().zip(got) {
+            assert_eq!(g, a.quantile_ns(*q), "q = {q}");
+        }
+        assert_eq!(LatencyRecorder::new().quantiles_ns([0.5]), [0]);
     }
 }

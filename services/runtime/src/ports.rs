@@ -58,6 +58,16 @@ pub fn hop_snapshot() -> Vec<HopEntry> {
     HOPS.with(|h| h.borrow().iter().map(|e| e.borrow().clone()).collect())
 }
 
+/// Calls `f` on each of this thread's hop statistics in place (no copy of
+/// the histograms: the once-a-second report stays cheap).
+pub fn for_each_hop(mut f: impl FnMut(&HopEntry)) {
+    HOPS.with(|h| {
+        for e in h.borrow().iter() {
+            f(&e.borrow());
+        }
+    });
+}
+
 /// The channel kind of a service name: its last `/`-separated segment.
 pub fn channel_kind(service: &str) -> &str {
     service.rsplit('/').next().unwrap_or(service)

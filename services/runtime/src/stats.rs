@@ -7,11 +7,11 @@
 use std::path::{Path, PathBuf};
 
 use iceoryx2::prelude::*;
-use ipc_types::{fixed_str, HopStats, ProcessStats, RunChannel, Sample, MAX_HOPS};
+use ipc_types::{fixed_str, HopStats, ProcessStats, RunChannel, Sample};
 use serde::{Deserialize, Serialize};
 
 use crate::latency::LatencyRecorder;
-use crate::ports::{hop_snapshot, Origin};
+use crate::ports::{for_each_hop, hop_snapshot, Origin};
 use crate::{domain, ChannelLimits, Publisher, RunArgs, RunReport, StepContext};
 
 /// Interval between two published statistics samples, ns (simulated time in
@@ -142,24 +142,32 @@ impl StatsReporter {
         s.process = fixed_str(&self.process);
         s.steps = report.steps;
         s.deadline_misses = report.deadline_misses;
-        s.step_p50_ns = self.step.quantile_ns(0.5);
-        s.step_p99_ns = self.step.quantile_ns(0.99);
+        let [p50, p99] = self.step.quantiles_ns([0.5, 0.99]);
+        s.step_p50_ns = p50;
+        s.step_p99_ns = p99;
         s.step_max_ns = self.step.max_ns();
         s.wake_late_p99_ns = self.wake_late.quantile_ns(0.99);
-        let hops = hop_snapshot();
-        s.hop_count = hops.len().min(MAX_HOPS) as u64;
-        for (slot, h) in s.hops.iter_mut().zip(&hops) {
-            s.lost += h.lost;
-            s.rejected += h.rejected;
-            *slot = HopStats {
-                channel: fixed_str(&h.kind),
-                count: h.latency.count(),
-                p50_ns: h.latency.quantile_ns(0.5),
-                p99_ns: h.latency.quantile_ns(0.99),
-                p999_ns: h.latency.quantile_ns(0.999),
-                max_ns: h.latency.max_ns(),
-            };
-        }
+        let mut n = 0;
+        let (mut lost, mut rejected) = (0, 0);
+        for_each_hop(|h| {
+            lost += h.lost;
+            rejected += h.rejected;
+            if let Some(slot) = s.hops.get_mut(n) {
+                let [p50_ns, p99_ns, p999_ns] = h.latency.quantiles_ns([0.5, 0.99, 0.999]);
+                *slot = HopStats {
+                    channel: fixed_str(&h.kind),
+                    count: h.latency.count(),
+                    p50_ns,
+                    p99_ns,
+                    p999_ns,
+                    max_ns: h.latency.max_ns(),
+                };
+                n += 1;
+            }
+        });
+        s.hop_count = n as u64;
+        s.lost = lost;
+        s.rejected = rejected;
         s
     }
 
