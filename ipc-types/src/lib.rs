@@ -166,7 +166,7 @@ impl<T: Finite, const N: usize> Finite for [T; N] {
 macro_rules! described {
     (
         $(#[$meta:meta])*
-        pub struct $name:ident ($ros:literal, $tn:literal) {
+        pub struct $name:ident ($ros:literal, $tn:literal $(, measured = $m:literal)?) {
             $( $(#[$fmeta:meta])* pub $field:ident : $ty:ty ),* $(,)?
         }
     ) => {
@@ -179,6 +179,7 @@ macro_rules! described {
         }
         impl Described for $name {
             const ROS_NAME: &'static str = $ros;
+            $(const MEASURED: bool = $m;)?
             fn fields() -> Vec<FieldDesc> {
                 vec![$( FieldDesc { name: schema::ros_field_name(stringify!($field)), ty: <$ty as FieldType>::describe() } ),*]
             }
@@ -201,13 +202,13 @@ macro_rules! described {
 macro_rules! sample {
     (
         $(#[$meta:meta])*
-        pub struct $name:ident ($ros:literal, $tn:literal, size = $size:expr) {
+        pub struct $name:ident ($ros:literal, $tn:literal, size = $size:expr $(, measured = $m:literal)?) {
             $( $(#[$fmeta:meta])* pub $field:ident : $ty:ty ),* $(,)?
         }
     ) => {
         described! {
             $(#[$meta])*
-            pub struct $name ($ros, $tn) {
+            pub struct $name ($ros, $tn $(, measured = $m)?) {
                 $( $(#[$fmeta])* pub $field: $ty ),*
             }
         }
@@ -513,7 +514,7 @@ sample! {
     /// One process's runtime statistics, cumulative since its start, published
     /// on the run's `stats` channel about once a second (simulated time in
     /// lockstep, wall time in realtime) and recorded.
-    pub struct ProcessStats("shoal/ProcessStats", "shoal.ProcessStats.v1", size = 144 + 64 * MAX_HOPS) {
+    pub struct ProcessStats("shoal/ProcessStats", "shoal.ProcessStats.v1", size = 144 + 64 * MAX_HOPS, measured = true) {
         /// Common header.
         pub header: Header,
         /// Vehicle (`run` for run-level processes), NUL-padded ASCII.
@@ -681,6 +682,36 @@ mod tests {
         let text = schema::ros2msg_schema::<T>().unwrap();
         assert!(text.contains("shoal/Header header"));
         assert!(!text.contains(" _"), "rust pad names leak into {text}");
+    }
+
+    /// Byte ranges of a field found by its offset in a zeroed sample.
+    fn masked<T: Sample>(field: impl Fn(&mut T) -> &mut u64) -> bool {
+        let mut v = <T as Sample>::zeroed();
+        let base = &v as *const T as usize;
+        let off = field(&mut v) as *mut u64 as usize - base;
+        schema::wall_clock_ranges::<T>()
+            .iter()
+            .any(|r| r.start <= off && off + 8 <= r.end)
+    }
+
+    #[test]
+    fn wall_clock_fields_are_masked_and_simulated_time_is_not() {
+        assert!(masked::<Truth>(|t| &mut t.header.publish_mono_ns));
+        assert!(masked::<Truth>(|t| &mut t.header.origin_mono_ns));
+        assert!(masked::<Truth>(|t| &mut t.thrust_applied_mono_ns));
+        assert!(!masked::<Truth>(|t| &mut t.header.sim_time_ns));
+        assert!(!masked::<Truth>(|t| &mut t.header.origin_sim_time_ns));
+        assert!(!masked::<Truth>(|t| &mut t.header.seq));
+        assert!(masked::<MpcStats>(|m| &mut m.solve_ns));
+        assert!(!masked::<Clock>(|c| &mut c.tick_ns));
+        // Runtime statistics measure the machine (even their counts depend on
+        // when samples were pulled): all but the header is masked.
+        assert!(masked::<ProcessStats>(|p| &mut p.step_p99_ns));
+        assert!(masked::<ProcessStats>(|p| &mut p.hops[3].p999_ns));
+        assert!(masked::<ProcessStats>(|p| &mut p.steps));
+        assert!(masked::<ProcessStats>(|p| &mut p.hops[3].count));
+        assert!(!masked::<ProcessStats>(|p| &mut p.header.sim_time_ns));
+        assert!(!masked::<ProcessStats>(|p| &mut p.header.seq));
     }
 
     #[test]

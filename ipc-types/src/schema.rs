@@ -55,6 +55,10 @@ pub trait FieldType {
 pub trait Described {
     /// ros2msg type name, `shoal/Name`.
     const ROS_NAME: &'static str;
+    /// True for a type that measures the machine rather than the simulation
+    /// (the runtime statistics): every field after the first (the header)
+    /// counts as wall-clock.
+    const MEASURED: bool = false;
     /// The fields in declaration order.
     fn fields() -> Vec<FieldDesc>;
 }
@@ -200,11 +204,19 @@ pub fn cdr_size<T: Described>() -> usize {
     walk(&T::fields(), 0)
 }
 
-/// Byte ranges of the fields of `T` that hold wall-clock readings (names
-/// ending in `mono_ns`, and `solve_ns`; everything but the header of a
-/// `shoal/ProcessStats`, which measures the machine, not the simulation):
-/// the only bytes allowed to differ between two lockstep runs of the same
-/// scenario and seed.
+/// True for a field that holds a wall-clock reading or a duration measured on
+/// the machine: a name ending in `_ns` that is not simulated time
+/// (`sim_time_ns`, `origin_sim_time_ns`, `tick_ns`). Publish and origin
+/// stamps, the MPC's solve time and the runtime statistics' percentiles all
+/// follow this naming; everything else is a function of the simulation.
+pub fn is_wall_clock_field(name: &str) -> bool {
+    name.ends_with("_ns") && !name.ends_with("sim_time_ns") && name != "tick_ns"
+}
+
+/// Byte ranges of the fields of `T` that hold wall-clock readings (see
+/// [`is_wall_clock_field`], and everything after the header of a
+/// [`Described::MEASURED`] type): the only bytes allowed to differ between
+/// two lockstep runs of the same scenario and seed.
 pub fn wall_clock_ranges<T: Described>() -> Vec<std::ops::Range<usize>> {
     fn walk(
         fields: &[FieldDesc],
@@ -213,8 +225,7 @@ pub fn wall_clock_ranges<T: Described>() -> Vec<std::ops::Range<usize>> {
         out: &mut Vec<std::ops::Range<usize>>,
     ) {
         for f in fields {
-            let is_wall = wall || f.name.ends_with("mono_ns") || f.name == "solve_ns";
-            walk_ty(&f.ty, off, is_wall, out);
+            walk_ty(&f.ty, off, wall || is_wall_clock_field(&f.name), out);
         }
     }
     fn walk_ty(ty: &TypeDesc, off: &mut usize, wall: bool, out: &mut Vec<std::ops::Range<usize>>) {
@@ -237,13 +248,9 @@ pub fn wall_clock_ranges<T: Described>() -> Vec<std::ops::Range<usize>> {
     let mut out = Vec::new();
     let mut off = 0;
     let fields = T::fields();
-    if T::ROS_NAME == "shoal/ProcessStats" {
-        let (header, rest) = fields.split_at(1.min(fields.len()));
-        walk(header, &mut off, false, &mut out);
-        walk(rest, &mut off, true, &mut out);
-    } else {
-        walk(&fields, &mut off, false, &mut out);
-    }
+    let (first, rest) = fields.split_at(1.min(fields.len()));
+    walk(first, &mut off, false, &mut out);
+    walk(rest, &mut off, T::MEASURED, &mut out);
     out
 }
 

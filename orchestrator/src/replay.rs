@@ -780,7 +780,7 @@ pub fn first_field_difference(
             } else {
                 format!("{prefix}.{}", f.name)
             };
-            let is_wall = wall || f.name.ends_with("mono_ns") || f.name == "solve_ns";
+            let is_wall = wall || ipc_types::schema::is_wall_clock_field(&f.name);
             if let Some(d) = walk_ty(w, &f.ty, path, is_wall) {
                 return Some(d);
             }
