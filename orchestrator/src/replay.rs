@@ -498,16 +498,8 @@ struct TypedTap<T: Sample> {
 
 impl<T: Sample> AnyTap for TypedTap<T> {
     fn take(&mut self, out: &mut Vec<Vec<u8>>) -> anyhow::Result<()> {
-        let far = shoal_runtime::StepContext {
-            sim_time_ns: u64::MAX,
-            tick: 0,
-            wake_mono_ns: 0,
-            since_last_ns: 0,
-            last: false,
-            mode: Mode::Realtime,
-        };
         self.sub
-            .take_ready(&far, |v| out.push(bytemuck::bytes_of(&v).to_vec()))?;
+            .take_all(|v| out.push(bytemuck::bytes_of(&v).to_vec()))?;
         Ok(())
     }
 }

@@ -59,18 +59,8 @@ impl<T: Sample> Tap for TypedTap<T> {
         };
         match ctx {
             Some(ctx) => self.sub.take_ready(ctx, push),
-            None => {
-                // Final drain: everything, regardless of stamp.
-                let far = StepContext {
-                    sim_time_ns: u64::MAX,
-                    tick: 0,
-                    wake_mono_ns: 0,
-                    since_last_ns: 0,
-                    last: true,
-                    mode: shoal_runtime::Mode::Lockstep,
-                };
-                self.sub.take_ready(&far, push)
-            }
+            // Final drain: everything, regardless of stamp.
+            None => self.sub.take_all(push),
         }
     }
     fn channel(&self) -> u16 {

@@ -418,6 +418,20 @@ impl<T: Sample> Subscriber<T> {
         self.pull(Some((ctx, &mut f)))
     }
 
+    /// Every held and arrived sample regardless of its stamp, oldest first
+    /// (a final drain, replay, outside readers).
+    pub fn take_all(&mut self, f: impl FnMut(T)) -> Result<(), RuntimeError> {
+        let any_time = StepContext {
+            sim_time_ns: u64::MAX,
+            tick: 0,
+            wake_mono_ns: 0,
+            since_last_ns: 0,
+            last: false,
+            mode: Mode::Realtime,
+        };
+        self.take_ready(&any_time, f)
+    }
+
     /// The newest ready sample, if any arrived since the last call.
     pub fn latest(&mut self, ctx: &StepContext) -> Result<Option<T>, RuntimeError> {
         let mut last = None;
