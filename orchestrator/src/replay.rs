@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use ipc_types::schema::{FieldDesc, TypeDesc};
-use ipc_types::{Clock, Header, Sample};
+use ipc_types::{Header, Sample};
 use recordings::Recording;
 use shoal_runtime::{ChannelLimits, Mode, Publisher, Subscriber};
 use shoal_scenario::{ProcessKind, ProcessSpec, Scenario};
@@ -603,7 +603,6 @@ fn drive(
     let mut steps = 0u64;
     let mut got = Vec::new();
     let mut difference = None;
-    let mut seq = 0u64;
     'ticks: for tick in 0..ticks {
         if !spec.due(tick) {
             continue;
@@ -616,23 +615,7 @@ fn drive(
             }
             fed += 1;
         }
-        let clock = Clock {
-            header: Header {
-                seq,
-                sim_time_ns: sim,
-                publish_mono_ns: shoal_runtime::mono_ns(),
-                origin_mono_ns: 0,
-                origin_sim_time_ns: sim,
-            },
-            tick,
-            tick_ns,
-            last: u64::from(tick + 1 == ticks),
-        };
-        seq += 1;
-        ports.clock.publish_stamped(clock)?;
-        ports.wakes[0]
-            .notify()
-            .map_err(|e| anyhow::anyhow!("wake: {e:?}"))?;
+        ports.start_tick(tick, ticks, tick_ns, &[0], std::slice::from_ref(spec))?;
         wait_done(
             ports,
             sup,

@@ -92,6 +92,8 @@ pub(crate) struct Ports {
     pub(crate) clock: Publisher<Clock>,
     pub(crate) done: Listener<ipc::Service>,
     pub(crate) wakes: Vec<Notifier<ipc::Service>>,
+    /// Sequence number of the next clock sample.
+    clock_seq: u64,
 }
 
 impl Ports {
@@ -120,7 +122,41 @@ impl Ports {
             clock,
             done,
             wakes,
+            clock_seq: 0,
         })
+    }
+
+    /// Starts lockstep tick `tick` of `ticks` (each `tick_ns` long): publishes
+    /// the clock, then wakes the processes in `due` (indices into `procs`).
+    pub(crate) fn start_tick(
+        &mut self,
+        tick: u64,
+        ticks: u64,
+        tick_ns: u64,
+        due: &[usize],
+        procs: &[ProcessSpec],
+    ) -> anyhow::Result<()> {
+        let sim = tick * tick_ns;
+        let clock = Clock {
+            header: Header {
+                seq: self.clock_seq,
+                sim_time_ns: sim,
+                publish_mono_ns: shoal_runtime::mono_ns(),
+                origin_mono_ns: 0,
+                origin_sim_time_ns: sim,
+            },
+            tick,
+            tick_ns,
+            last: u64::from(tick + 1 == ticks),
+        };
+        self.clock_seq += 1;
+        self.clock.publish_stamped(clock)?;
+        for &i in due {
+            self.wakes[i]
+                .notify()
+                .map_err(|e| anyhow::anyhow!("wake {}: {e:?}", procs[i].label()))?;
+        }
+        Ok(())
     }
 }
 
@@ -306,7 +342,6 @@ fn lockstep(
     let bar = progress_bar(opts, scenario.duration_s.ceil() as u64);
     let start = Instant::now();
     let mut due: Vec<usize> = Vec::with_capacity(procs.len());
-    let mut seq = 0u64;
     // Kills and stalls, by the tick at which they strike.
     let mut injections: Vec<(u64, &shoal_scenario::faults::Fault)> = scenario
         .faults
@@ -329,25 +364,7 @@ fn lockstep(
         if due.is_empty() {
             continue;
         }
-        let clock = Clock {
-            header: Header {
-                seq,
-                sim_time_ns: sim,
-                publish_mono_ns: shoal_runtime::mono_ns(),
-                origin_mono_ns: 0,
-                origin_sim_time_ns: sim,
-            },
-            tick,
-            tick_ns,
-            last: u64::from(tick + 1 == ticks),
-        };
-        seq += 1;
-        ports.clock.publish_stamped(clock)?;
-        for &i in &due {
-            ports.wakes[i]
-                .notify()
-                .map_err(|e| anyhow::anyhow!("wake {}: {e:?}", procs[i].label()))?;
-        }
+        ports.start_tick(tick, ticks, tick_ns, &due, procs)?;
         wait_done(
             ports,
             sup,
