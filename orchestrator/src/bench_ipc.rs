@@ -426,13 +426,7 @@ pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
             .filter(|c| cmd.cases.iter().any(|x| x == c))
             .collect()
     };
-    let bin_dir = match &cmd.bin_dir {
-        Some(d) => d.clone(),
-        None => std::env::current_exe()?
-            .parent()
-            .map(PathBuf::from)
-            .context("cannot locate the directory of shoal")?,
-    };
+    let bin_dir = crate::bin_dir_or_default(cmd.bin_dir.clone())?;
     let bin = bin_dir.join(PEER_BIN);
     if !bin.is_file() {
         bail!(

@@ -137,6 +137,18 @@ fn load_scenario(path: &Option<PathBuf>) -> anyhow::Result<Scenario> {
     }
 }
 
+/// Where the service binaries are: `--bin-dir`, else the directory of the
+/// running `shoal` (cargo builds them side by side).
+fn bin_dir_or_default(bin_dir: Option<PathBuf>) -> anyhow::Result<PathBuf> {
+    match bin_dir {
+        Some(d) => Ok(d),
+        None => std::env::current_exe()?
+            .parent()
+            .map(PathBuf::from)
+            .context("cannot locate the directory of the shoal binary"),
+    }
+}
+
 /// Everything one run needs besides its scenario.
 struct RunSettings {
     mode: Mode,
@@ -153,13 +165,7 @@ impl RunSettings {
         quiet: bool,
         tick_timeout: f64,
     ) -> anyhow::Result<Self> {
-        let bin_dir = match bin_dir {
-            Some(d) => d,
-            None => std::env::current_exe()?
-                .parent()
-                .map(PathBuf::from)
-                .context("cannot locate the service binaries")?,
-        };
+        let bin_dir = bin_dir_or_default(bin_dir)?;
         Ok(Self {
             mode,
             bin_dir,

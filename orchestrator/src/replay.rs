@@ -424,13 +424,7 @@ fn rerun(rec: &Recording, cmd: &ReplayCmd, kind_name: &str) -> anyhow::Result<Re
         .find(|p| p.kind == kind && p.vehicle == vehicle)
         .with_context(|| format!("no process {kind_name} of vehicle {vehicle} in the scenario"))?;
     spec.index = 0;
-    let bin_dir = match &cmd.bin_dir {
-        Some(d) => d.clone(),
-        None => std::env::current_exe()?
-            .parent()
-            .map(PathBuf::from)
-            .context("cannot locate the service binaries")?,
-    };
+    let bin_dir = crate::bin_dir_or_default(cmd.bin_dir.clone())?;
     let binary = bin_dir.join(kind.binary());
     if !binary.is_file() {
         bail!("service binary {} not found", binary.display());
