@@ -733,6 +733,23 @@ where
     Ok(())
 }
 
+/// Draws one curve per vehicle, in the vehicle's colour, named in the legend.
+fn vehicle_curves<'a, DB: DrawingBackend + 'a>(
+    c: &mut Chart<'a, DB>,
+    leg: &mut Legend,
+    d: &Data,
+    series: &[(usize, Vec<(f64, f64)>)],
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    for (k, s) in series {
+        let name = d.tracks[*k].name.as_str();
+        curve(c, leg, s.iter().copied(), d.colour(*k), 3, Some(name))?;
+    }
+    Ok(())
+}
+
 /// Draws a horizontal dashed line at `y` across `x`, adding a legend entry
 /// if labelled.
 #[allow(clippy::too_many_arguments)]
@@ -1012,17 +1029,7 @@ where
     let mut c = chart(&top).build_cartesian_2d(x.clone(), y_full.clone())?;
     mesh(&mut c, "time (s)", "clearance (m)", false)?;
     shade_passage(&mut c, &mut leg, d, &x, &y_full)?;
-    for (k, s) in &series {
-        let name = d.tracks[*k].name.as_str();
-        curve(
-            &mut c,
-            &mut leg,
-            s.iter().copied(),
-            d.colour(*k),
-            3,
-            Some(name),
-        )?;
-    }
+    vehicle_curves(&mut c, &mut leg, d, &series)?;
     if d.field.is_none() {
         c.draw_series(std::iter::once(Text::new(
             "no obstacles in this scenario",
@@ -1250,17 +1257,7 @@ where
         false,
     )?;
     shade_passage(&mut c, &mut leg, d, &x, &y)?;
-    for (k, s) in &series {
-        let name = d.tracks[*k].name.as_str();
-        curve(
-            &mut c,
-            &mut leg,
-            s.iter().copied(),
-            d.colour(*k),
-            3,
-            Some(name),
-        )?;
-    }
+    vehicle_curves(&mut c, &mut leg, d, &series)?;
     draw_legend(&legend_area, &leg)
 }
 
