@@ -8,12 +8,11 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
 use ipc_types::bench::{bench_event_name, bench_service_name, BenchDirection};
 
 use crate::driver::{run_pinger, run_ponger, Served};
 use crate::payload::Payload;
-use crate::wait::Backoff;
+use crate::wait::{check_run, notify, wait_error, Backoff};
 use crate::{dbg, raw_config, BenchError, Case, PeerConfig, PeerReport, PongReport};
 
 /// The ports of one raw peer.
@@ -104,13 +103,6 @@ fn send<M: Payload + ZeroCopySend>(
         })
 }
 
-fn notify(n: &Notifier<ipc::Service>) -> Result<(), BenchError> {
-    n.notify().map(|_| ()).map_err(|e| BenchError::Io {
-        what: "notify",
-        reason: dbg(e),
-    })
-}
-
 /// Takes every waiting sample; returns the one of `round`, if any.
 fn take_round<M: Payload + ZeroCopySend>(
     rx: &Subscriber<ipc::Service, M, ()>,
@@ -144,22 +136,6 @@ fn echo_all<M: Payload + ZeroCopySend>(
         served.add(round);
     }
     Ok(served)
-}
-
-fn wait_error(e: impl std::fmt::Debug) -> BenchError {
-    BenchError::Io {
-        what: "waiting",
-        reason: dbg(e),
-    }
-}
-
-fn check_run(r: WaitSetRunResult) -> Result<(), BenchError> {
-    match r {
-        WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => {
-            Err(BenchError::Interrupted)
-        }
-        _ => Ok(()),
-    }
 }
 
 /// The pinger of a raw case.

@@ -10,7 +10,6 @@ use std::time::Duration;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
 use ipc_types::bench::{bench_service_name, BenchDirection};
 use ipc_types::Sample;
 use shoal_runtime::ports::Origin;
@@ -18,7 +17,7 @@ use shoal_runtime::{ChannelLimits, Mode, Publisher, StepContext, Subscriber};
 
 use crate::driver::{run_pinger, run_ponger, Served};
 use crate::payload::Payload;
-use crate::wait::Backoff;
+use crate::wait::{check_run, notify, wait_error, Backoff};
 use crate::{dbg, BenchError, Case, PeerConfig, PeerReport, PongReport};
 
 /// Subscriber buffer of the bench channels (a service's usual depth).
@@ -136,29 +135,6 @@ fn echo_all<S: Sample + Payload>(
     match failure {
         Some(e) => Err(e.into()),
         None => Ok(served),
-    }
-}
-
-fn notify(n: &Notifier<ipc::Service>) -> Result<(), BenchError> {
-    n.notify().map(|_| ()).map_err(|e| BenchError::Io {
-        what: "notify",
-        reason: dbg(e),
-    })
-}
-
-fn wait_error(e: impl std::fmt::Debug) -> BenchError {
-    BenchError::Io {
-        what: "waiting",
-        reason: dbg(e),
-    }
-}
-
-fn check_run(r: WaitSetRunResult) -> Result<(), BenchError> {
-    match r {
-        WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => {
-            Err(BenchError::Interrupted)
-        }
-        _ => Ok(()),
     }
 }
 

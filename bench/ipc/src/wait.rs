@@ -1,10 +1,12 @@
-//! The polling wait every `*-poll` case shares: spin, then yield, and give
-//! up after a timeout. The clock is read only every [`CHECK_EVERY`] misses,
-//! so a reply that arrives within the spin phase costs no clock read.
+//! Waiting, shared by the iceoryx2 cases (raw and shoal): the polling wait
+//! every `*-poll` case uses — spin, then yield, and give up after a timeout;
+//! the clock is read only every [`CHECK_EVERY`] misses, so a reply that
+//! arrives within the spin phase costs no clock read — and the notify and
+//! WaitSet error handling of the blocking cases.
 
 use std::time::{Duration, Instant};
 
-use crate::BenchError;
+use crate::{dbg, BenchError};
 
 /// Misses spent in `spin_loop` before each further miss yields the CPU.
 const SPIN_MISSES: u32 = 20_000;
@@ -53,5 +55,34 @@ impl Backoff {
             }
         }
         Ok(())
+    }
+}
+
+/// Notifies an event, as a bench error on failure.
+pub(crate) fn notify(
+    n: &iceoryx2::port::notifier::Notifier<iceoryx2::prelude::ipc::Service>,
+) -> Result<(), BenchError> {
+    n.notify().map(|_| ()).map_err(|e| BenchError::Io {
+        what: "notify",
+        reason: dbg(e),
+    })
+}
+
+/// A failed wait, as a bench error.
+pub(crate) fn wait_error(e: impl std::fmt::Debug) -> BenchError {
+    BenchError::Io {
+        what: "waiting",
+        reason: dbg(e),
+    }
+}
+
+/// A wait that a signal ended is an interruption of the bench.
+pub(crate) fn check_run(r: iceoryx2::waitset::WaitSetRunResult) -> Result<(), BenchError> {
+    use iceoryx2::waitset::WaitSetRunResult;
+    match r {
+        WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt => {
+            Err(BenchError::Interrupted)
+        }
+        _ => Ok(()),
     }
 }
