@@ -9,6 +9,7 @@ use std::rc::Rc;
 use iceoryx2::port::publisher::Publisher as IoxPublisher;
 use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use ipc_types::{Header, Sample};
 
 use crate::domain::ChannelLimits;
@@ -135,7 +136,7 @@ fn open_pubsub<T: Sample>(
             .open_or_create();
         match r {
             Ok(f) => return Ok(f),
-            Err(e) if attempt < OPEN_RETRIES && transient(&format!("{e:?}")) => {
+            Err(e) if attempt < OPEN_RETRIES && transient(&e) => {
                 attempt += 1;
                 std::thread::sleep(std::time::Duration::from_millis(10));
             }
@@ -152,17 +153,21 @@ fn open_pubsub<T: Sample>(
 /// Attempts at opening a service that another process is creating.
 const OPEN_RETRIES: u32 = 200;
 
-/// True for the errors of a service caught half-created by another process.
-fn transient(reason: &str) -> bool {
-    [
-        "DoesNotExist",
-        "IsBeingCreatedByAnotherInstance",
-        "InternalFailure",
-        "AlreadyExists",
-        "ServiceInCorruptedState",
-    ]
-    .iter()
-    .any(|k| reason.contains(k))
+/// True for the errors of a service caught half-created (or half-removed)
+/// by another process: opening found no service yet, or creating found it
+/// just created by someone else.
+fn transient(e: &PublishSubscribeOpenOrCreateError) -> bool {
+    use iceoryx2::service::builder::publish_subscribe::{
+        PublishSubscribeCreateError as C, PublishSubscribeOpenError as O,
+    };
+    matches!(
+        e,
+        PublishSubscribeOpenOrCreateError::SystemInFlux
+            | PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(O::DoesNotExist)
+            | PublishSubscribeOpenOrCreateError::PublishSubscribeCreateError(
+                C::AlreadyExists | C::IsBeingCreatedByAnotherInstance
+            )
+    )
 }
 
 /// A publisher of one sample type on one service.
