@@ -352,7 +352,8 @@ fn one_run(
 ) -> anyhow::Result<(Value, f64)> {
     let cpu_before = sys::self_cpu_s();
     let summary = run_and_summarize(scenario.clone(), out, settings)
-        .with_context(|| format!("the run into {} failed", out.display()))?;
+        .with_context(|| format!("the run into {} failed", out.display()))?
+        .summary;
     Ok((summary, cpu_before))
 }
 

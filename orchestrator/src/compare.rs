@@ -125,17 +125,17 @@ pub fn cmd_compare(cmd: CompareCmd) -> anyhow::Result<()> {
     let settings = RunSettings::new(Mode::Lockstep, cmd.bin_dir, cmd.quiet, 30.0)?;
     let mut rows = Vec::new();
     let mut runs = Vec::new();
-    for (name, mut scenario) in variants(&base)? {
+    for (name, scenario) in variants(&base)? {
         eprintln!("== {name}");
-        let dir = out.join(name);
-        let summary = run_and_summarize(scenario.clone(), &dir, &settings)
+        let done = run_and_summarize(scenario, &out.join(name), &settings)
             .with_context(|| format!("variant {name}"))?;
-        rows.push(row(name, &summary));
-        crate::check::resolve(&mut scenario)?;
-        let rec = recordings::Recording::open(&dir.join("recording.mcap"))?;
-        runs.push((name, scenario, rec));
+        rows.push(row(name, &done.summary));
+        runs.push((name, done));
     }
-    let refs: Vec<_> = runs.iter().map(|(n, s, r)| (*n, s, r)).collect();
+    let refs: Vec<_> = runs
+        .iter()
+        .map(|(n, d)| (*n, &d.scenario, &d.recording))
+        .collect();
     crate::plots::write_compare_plot(&refs, &out).context("writing the comparison plot")?;
     let md = format!(
         "# {} (seed {}): method vs acoustic baseline vs no vertical shift\n\nsafe distance {} m\n\n{}",

@@ -176,12 +176,23 @@ impl RunSettings {
     }
 }
 
-/// Resolves, runs and summarises one scenario into `out`; returns the summary.
+/// A finished, summarised run.
+struct Finished {
+    /// What summary.json holds.
+    summary: serde_json::Value,
+    /// The scenario as resolved and run (D_a/D_b assigned).
+    scenario: Scenario,
+    /// The run's recording, read.
+    recording: recordings::Recording,
+}
+
+/// Resolves, runs and summarises one scenario into `out` (summary.json and
+/// plots written).
 fn run_and_summarize(
     mut scenario: Scenario,
     out: &std::path::Path,
     settings: &RunSettings,
-) -> anyhow::Result<serde_json::Value> {
+) -> anyhow::Result<Finished> {
     check::resolve(&mut scenario).context("scenario refused")?;
     if out.join("recording.mcap").exists() {
         anyhow::bail!(
@@ -205,7 +216,11 @@ fn run_and_summarize(
     std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
         .with_context(|| format!("cannot write {}", path.display()))?;
     plots::write_plots(&scenario, &rec, &out.join("plots")).context("writing the plots")?;
-    Ok(summary)
+    Ok(Finished {
+        summary,
+        scenario,
+        recording: rec,
+    })
 }
 
 fn cmd_run(cmd: RunCmd) -> anyhow::Result<()> {
@@ -222,7 +237,7 @@ fn cmd_run(cmd: RunCmd) -> anyhow::Result<()> {
         .unwrap_or_else(|| run::default_out(&scenario));
     let mut settings = RunSettings::new(cmd.mode, cmd.bin_dir, cmd.quiet, cmd.tick_timeout)?;
     settings.spin_us = cmd.spin_us;
-    let summary = run_and_summarize(scenario, &out, &settings)?;
+    let summary = run_and_summarize(scenario, &out, &settings)?.summary;
     if !cmd.quiet {
         print_table(&summary);
     }
