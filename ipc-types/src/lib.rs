@@ -544,6 +544,82 @@ sample! {
     }
 }
 
+/// What an [`Event`] reports (its `kind`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum EventKind {
+    /// A scenario `[[faults]]` entry struck (kill, stall).
+    FaultInjected = 1,
+    /// A process ended while the run needed it.
+    ProcessDied = 2,
+    /// A dead process was started again (policy `restart`).
+    ProcessRestarted = 3,
+    /// A restarted process is ready again: the gap is over.
+    ProcessReady = 4,
+    /// The run stopped early (policy `abort`, too many restarts, a hang).
+    RunAborted = 5,
+}
+
+impl EventKind {
+    /// Every kind.
+    pub const ALL: [EventKind; 5] = [
+        EventKind::FaultInjected,
+        EventKind::ProcessDied,
+        EventKind::ProcessRestarted,
+        EventKind::ProcessReady,
+        EventKind::RunAborted,
+    ];
+
+    /// Snake-case name, as in summary.json.
+    pub const fn name(self) -> &'static str {
+        match self {
+            EventKind::FaultInjected => "fault_injected",
+            EventKind::ProcessDied => "process_died",
+            EventKind::ProcessRestarted => "process_restarted",
+            EventKind::ProcessReady => "process_ready",
+            EventKind::RunAborted => "run_aborted",
+        }
+    }
+
+    /// The kind with code `code`.
+    pub fn from_code(code: u32) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| *k as u32 == code)
+    }
+}
+
+sample! {
+    /// Something that happened to the run's processes: an injected fault, a
+    /// death, a restart, the end of a gap, an abort. Published by the
+    /// orchestrator on the run's `events` channel (with history, so a
+    /// restarted recorder still records the death that it was) and recorded
+    /// as `/events`; the same events are listed in summary.json.
+    pub struct Event("shoal/Event", "shoal.Event.v1", size = 256) {
+        /// Common header (`sim_time_ns`: simulated time of the event).
+        pub header: Header,
+        /// [`EventKind`] code.
+        pub kind: u32,
+        /// Index of the process in the run, `u32::MAX` for the run itself.
+        pub process_index: u32,
+        /// Restarts of this process so far (after this event).
+        pub restarts: u32,
+        /// Exit status of a dead process, or -1 (killed by a signal, or not a death).
+        pub exit_code: i32,
+        /// Signal that killed a dead process, or 0.
+        pub signal: i32,
+        /// Reserved (zero).
+        pub reserved: u32,
+        /// Wall time the process was gone (`process_ready`), or the stall's
+        /// length (`fault_injected`), s; 0 otherwise.
+        pub duration_s: f64,
+        /// Wall time of the event, monotonic ns.
+        pub event_mono_ns: u64,
+        /// `vehicle/kind` of the process, NUL-padded ASCII.
+        pub process: [u8; 32],
+        /// Human-readable detail, NUL-padded UTF-8 (truncated).
+        pub detail: [u8; 144],
+    }
+}
+
 /// Copies `s` into a NUL-padded fixed-size ASCII field (truncating).
 pub fn fixed_str<const N: usize>(s: &str) -> [u8; N] {
     let mut out = [0u8; N];
@@ -633,6 +709,8 @@ pub enum RunChannel {
     Done,
     /// [`ProcessStats`] of every process.
     Stats,
+    /// [`Event`]s of the run, from the orchestrator.
+    Events,
 }
 
 impl RunChannel {
@@ -643,6 +721,7 @@ impl RunChannel {
             RunChannel::Clock => "clock",
             RunChannel::Done => "done",
             RunChannel::Stats => "stats",
+            RunChannel::Events => "events",
         }
     }
 }
@@ -728,6 +807,7 @@ mod tests {
         check_layout::<MpcStats>();
         check_layout::<Clock>();
         check_layout::<ProcessStats>();
+        check_layout::<Event>();
         check_layout::<Mixed>();
     }
 

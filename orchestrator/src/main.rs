@@ -10,6 +10,7 @@ mod export;
 mod gen;
 mod plots;
 mod recover;
+mod recovery;
 mod replay;
 mod run;
 mod summary;

@@ -21,7 +21,7 @@ use recordings::Recording;
 use shoal_runtime::{ChannelLimits, Mode, Publisher, Subscriber};
 use shoal_scenario::{ProcessKind, ProcessSpec, Scenario};
 
-use crate::run::{wait_done, Ports};
+use crate::run::{wait_done, wait_ready, Ports};
 use crate::supervisor::Supervisor;
 use crate::sys;
 
@@ -110,6 +110,10 @@ macro_rules! with_sample_type {
                 type $T = ProcessStats;
                 $body
             }
+            "shoal/Event" => {
+                type $T = Event;
+                $body
+            }
             _ => $other,
         }
     }};
@@ -141,6 +145,7 @@ fn limits_of(topic: &str, vehicles: usize, processes: usize) -> ChannelLimits {
     match topic {
         "/world" => ChannelLimits::world(vehicles),
         "/stats" => shoal_runtime::stats::stats_limits(processes),
+        "/events" => ChannelLimits::events(),
         _ => ChannelLimits::vehicle(),
     }
 }
@@ -581,14 +586,12 @@ fn drive(
     let (binary, args, log) = command();
     sup.spawn(spec, &binary, &args, &log)
         .with_context(|| format!("cannot start {}", spec.label()))?;
-    wait_done(
+    wait_ready(
         ports,
         sup,
         std::slice::from_ref(spec),
         &[0],
         Duration::from_secs(30),
-        0.0,
-        Duration::ZERO,
     )?;
 
     let ticks = scenario.ticks();

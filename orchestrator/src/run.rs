@@ -10,10 +10,11 @@ use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
-use ipc_types::{Clock, Header, RunChannel};
+use ipc_types::{Clock, EventKind, Header, RunChannel};
 use shoal_runtime::{ChannelLimits, Mode, Publisher};
 use shoal_scenario::{ProcessKind, ProcessSpec, Scenario};
 
+use crate::recovery::{Happening, Journal, Launch, Recovery};
 use crate::supervisor::{Death, Supervisor};
 use crate::sys;
 
@@ -85,8 +86,8 @@ pub enum RunError {
     Interrupted(&'static str),
 }
 
-/// The orchestrator's ports in the run's domain.
-/// The orchestrator's ports of a run: the clock, every process's wake event, `done`.
+/// The orchestrator's ports of a run: the clock, every process's wake
+/// event, `done`, the `events` channel; and what it does when a process dies.
 pub(crate) struct Ports {
     pub(crate) node: Node<ipc::Service>,
     pub(crate) clock: Publisher<Clock>,
@@ -94,6 +95,10 @@ pub(crate) struct Ports {
     pub(crate) wakes: Vec<Notifier<ipc::Service>>,
     /// Sequence number of the next clock sample.
     clock_seq: u64,
+    /// The run's events.
+    pub(crate) journal: Journal,
+    /// The supervision policy at work (abort unless the run sets another).
+    pub(crate) recovery: Recovery,
 }
 
 impl Ports {
@@ -117,12 +122,15 @@ impl Ports {
                 .map_err(|e| anyhow::anyhow!("wake notifier of {}: {e:?}", p.label()))?;
             wakes.push(n);
         }
+        let journal = Journal::open(&node, run_id)?;
         Ok(Self {
             node,
             clock,
             done,
             wakes,
             clock_seq: 0,
+            journal,
+            recovery: Recovery::abort(procs.len()),
         })
     }
 
@@ -180,12 +188,6 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         }
     }
 
-    if scenario.supervision.policy == shoal_scenario::faults::Policy::Restart {
-        bail!(
-            "supervision.policy = \"restart\" is not supported yet: a dead process stops the run \
-             (policy \"abort\"); nothing was started"
-        );
-    }
     // A run that died (SIGKILL, power loss) left its domain behind: remove it.
     for (dead, files) in shoal_runtime::sweep_stale_domains() {
         tracing::warn!(run = %dead, files, "removed the shared memory of a dead run");
@@ -209,58 +211,41 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     let mut sup = Supervisor::default();
     let epoch_margin_ns = 1_000_000_000 + 20_000_000 * procs.len() as u64;
     let epoch = shoal_runtime::mono_ns() + epoch_margin_ns;
+    let launch = Launch {
+        bin_dir: opts.bin_dir.clone(),
+        out: opts.out.clone(),
+        run_id: run_id.clone(),
+        processes: procs.len(),
+        mode: opts.mode,
+        epoch_mono_ns: epoch,
+        spin_us: opts.spin_us,
+        scenario_path: scenario_path.clone(),
+        scenario: scenario.clone(),
+    };
 
     let result = (|| -> anyhow::Result<(f64, u64)> {
+        ports.recovery = Recovery::for_run(&ports.node, &procs, launch.clone())?;
         for p in &procs {
-            let mut args = vec![
-                "--run-id".to_string(),
-                run_id.clone(),
-                "--vehicle".into(),
-                p.vehicle.clone(),
-                "--process".into(),
-                p.kind.name().into(),
-                "--index".into(),
-                p.index.to_string(),
-                "--processes".into(),
-                procs.len().to_string(),
-                "--mode".into(),
-                opts.mode.as_str().into(),
-                "--period-s".into(),
-                format!("{}", 1.0 / scenario.rate_hz(p.kind)),
-                "--epoch-mono-ns".into(),
-                epoch.to_string(),
-                "--phase-s".into(),
-                format!("{}", p.phase as f64 * scenario.rates.tick_s),
-                "--spin-us".into(),
-                opts.spin_us.to_string(),
-                "--scenario".into(),
-                scenario_path.display().to_string(),
-            ];
-            if p.kind == ProcessKind::Recorder {
-                args.push("--out".into());
-                args.push(recording.display().to_string());
-            }
-            let log = opts
-                .out
-                .join("logs")
-                .join(format!("{}.{}.log", p.vehicle, p.kind.name()));
-            sup.spawn(p, &opts.bin_dir.join(p.kind.binary()), &args, &log)
-                .with_context(|| format!("cannot start {}", p.label()))?;
+            sup.spawn(
+                p,
+                &launch.binary(p),
+                &launch.args(p, 0, None),
+                &launch.log(p),
+            )
+            .with_context(|| format!("cannot start {}", p.label()))?;
         }
         // Ready: every process reports once its ports exist.
         let all: Vec<usize> = (0..procs.len()).collect();
-        wait_done(
+        wait_ready(
             &mut ports,
             &mut sup,
             &procs,
             &all,
             Duration::from_secs(60).max(opts.tick_timeout),
-            0.0,
-            Duration::ZERO,
         )?;
         match opts.mode {
             Mode::Lockstep => lockstep(opts, &mut ports, &mut sup, &procs),
-            Mode::Realtime => realtime(opts, &mut ports, &mut sup, epoch),
+            Mode::Realtime => realtime(opts, &mut ports, &mut sup, &procs, epoch),
         }
     })();
 
@@ -269,11 +254,20 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         |c| c.spec.kind == ProcessKind::Recorder,
         Duration::from_secs(5),
     );
+    let events = std::mem::take(&mut ports.journal.list);
+    let parts = std::mem::take(&mut ports.recovery.recording_parts);
     drop(ports);
     let stats = shoal_runtime::stats::read_stats_files(&run_id);
     shoal_runtime::cleanup_domain(&run_id);
+    // A restarted recorder wrote the rest of the run into new files: join them.
+    let joined = if parts.is_empty() {
+        Ok(())
+    } else {
+        join_recordings(&recording, &parts)
+    };
 
     let (wall_time_s, ticks) = result?;
+    joined?;
     let mut cpu_time_s: BTreeMap<String, f64> = BTreeMap::new();
     let mut max_rss_kib: BTreeMap<String, i64> = BTreeMap::new();
     for c in sup.children() {
@@ -286,8 +280,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     }
     cpu_time_s.insert("orchestrator".into(), sys::self_cpu_s());
     let failed: Vec<String> = sup
-        .children()
-        .iter()
+        .latest()
         .filter(|c| c.spec.kind == ProcessKind::Recorder && !c.exit.is_some_and(|e| e.success()))
         .map(|c| {
             format!(
@@ -313,8 +306,32 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         processes: procs.len(),
         ticks,
         stats,
-        events: std::mem::take(&mut sup.events),
+        events,
     })
+}
+
+/// Joins the first recording and those of restarted recorders (`parts`, in
+/// order) into `recording`; the parts are removed once the joined file has
+/// been read back whole.
+fn join_recordings(recording: &Path, parts: &[PathBuf]) -> anyhow::Result<()> {
+    let mut inputs: Vec<&Path> = vec![recording];
+    inputs.extend(parts.iter().map(PathBuf::as_path).filter(|p| p.is_file()));
+    let joined = recording.with_extension("joined.mcap");
+    let _ = std::fs::remove_file(&joined);
+    let report = recordings::merge(&inputs, &joined)
+        .with_context(|| format!("cannot join the recordings {inputs:?}"))?;
+    std::fs::rename(&joined, recording)
+        .with_context(|| format!("cannot move {} into place", joined.display()))?;
+    for p in parts {
+        let _ = std::fs::remove_file(p);
+    }
+    tracing::info!(
+        parts = inputs.len(),
+        messages = report.messages,
+        dropped_bytes = report.dropped_bytes,
+        "joined the recordings of a restarted recorder"
+    );
+    Ok(())
 }
 
 fn progress_bar(opts: &RunOptions, len: u64) -> indicatif::ProgressBar {
@@ -356,7 +373,13 @@ fn lockstep(
     for tick in 0..ticks {
         let sim = tick * tick_ns;
         while next_injection < injections.len() && injections[next_injection].0 <= tick {
-            inject(injections[next_injection].1, procs, sup, sim);
+            inject(
+                injections[next_injection].1,
+                procs,
+                sup,
+                &mut ports.journal,
+                sim,
+            );
             next_injection += 1;
         }
         due.clear();
@@ -371,9 +394,10 @@ fn lockstep(
             procs,
             &due,
             opts.tick_timeout,
-            sim as f64 * 1e-9,
+            sim as f64 / 1e9,
             Duration::from_micros(opts.spin_us),
         )?;
+        ports.recovery.track_truths();
         if tick % 50 == 0 {
             bar.set_position((sim as f64 * 1e-9) as u64);
         }
@@ -387,6 +411,7 @@ fn inject(
     fault: &shoal_scenario::faults::Fault,
     procs: &[ProcessSpec],
     sup: &mut Supervisor,
+    journal: &mut Journal,
     sim_ns: u64,
 ) {
     use shoal_scenario::faults::FaultAction;
@@ -415,20 +440,21 @@ fn inject(
         }
         FaultAction::Drop | FaultAction::Blind => return,
     };
-    tracing::warn!(process = %spec.label(), action, t_s = sim_ns as f64 * 1e-9, "fault injected");
-    sup.events.push(serde_json::json!({
-        "t_s": sim_ns as f64 * 1e-9,
-        "event": "fault_injected",
-        "action": action,
-        "process": spec.label(),
-        "duration_s": fault.duration_s,
-    }));
+    tracing::warn!(process = %spec.label(), action, t_s = sim_ns as f64 / 1e9, "fault injected");
+    let mut h = Happening::new(EventKind::FaultInjected, sim_ns as f64 / 1e9, Some(spec));
+    h.duration_s = fault.duration_s.unwrap_or(0.0);
+    h.detail = action.to_string();
+    journal.emit(
+        h,
+        serde_json::json!({ "action": action, "duration_s": fault.duration_s }),
+    );
 }
 
 fn realtime(
     opts: &RunOptions,
     ports: &mut Ports,
     sup: &mut Supervisor,
+    procs: &[ProcessSpec],
     epoch: u64,
 ) -> anyhow::Result<(f64, u64)> {
     let scenario = &opts.scenario;
@@ -454,15 +480,21 @@ fn realtime(
             )
             .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
         check_signal(r)?;
-        if let Some(d) = sup.reap().into_iter().next() {
-            sup.events.push(serde_json::json!({
-                "t_s": now.saturating_sub(epoch) as f64 * 1e-9,
-                "event": "process_died",
-                "process": d.label,
-                "exit": d.exit.describe(),
-                "policy": "abort",
-            }));
-            return Err(RunError::ChildDied(d).into());
+        let t_s = now.saturating_sub(epoch) as f64 * 1e-9;
+        ports.recovery.track_truths();
+        for d in sup.reap() {
+            ports.handle_death(d, procs, sup, t_s)?;
+        }
+        // Restarted processes report ready (they run on their own clock).
+        let n = procs.len();
+        let mut ready = Vec::new();
+        let _ = ports.done.try_wait(|ev| {
+            if let Some(i) = ev.id.as_value().checked_sub(n).filter(|i| *i < n) {
+                ready.push(i);
+            }
+        });
+        for i in ready {
+            ports.recovery.ready(i, procs, &mut ports.journal, t_s);
         }
         if now > epoch {
             bar.set_position((now - epoch) / 1_000_000_000);
@@ -483,8 +515,67 @@ fn check_signal(r: WaitSetRunResult) -> Result<(), RunError> {
     }
 }
 
-/// Waits until every process in `expected` has notified `done`.
-/// Waits until every process in `expected` has notified `done`.
+/// What [`wait_done`] has heard on `done`.
+struct Tally {
+    n: usize,
+    pending: Vec<bool>,
+    remaining: usize,
+    ready: Vec<usize>,
+}
+
+impl Tally {
+    /// Done ids are process indices; ready ids follow them.
+    fn on(&mut self, id: usize) {
+        if id < self.n {
+            if self.pending[id] {
+                self.pending[id] = false;
+                self.remaining -= 1;
+            }
+        } else if id < 2 * self.n {
+            self.ready.push(id - self.n);
+        }
+    }
+}
+
+impl Ports {
+    /// A process died at simulated time `t_s`: the supervision policy
+    /// restarts it, or the run stops with the cause.
+    pub(crate) fn handle_death(
+        &mut self,
+        d: Death,
+        procs: &[ProcessSpec],
+        sup: &mut Supervisor,
+        t_s: f64,
+    ) -> Result<(), RunError> {
+        self.recovery
+            .on_death(d, procs, sup, &self.node, &mut self.journal, t_s)
+            .map_err(RunError::ChildDied)
+    }
+}
+
+/// Waits until every process in `expected` has reported ready (its ports
+/// exist), for at most `timeout`.
+pub(crate) fn wait_ready(
+    ports: &mut Ports,
+    sup: &mut Supervisor,
+    procs: &[ProcessSpec],
+    expected: &[usize],
+    timeout: Duration,
+) -> anyhow::Result<()> {
+    for &i in expected {
+        ports.recovery.await_ready(i, timeout);
+    }
+    wait_done(ports, sup, procs, &[], timeout, 0.0, Duration::ZERO)
+}
+
+/// Waits until every process in `expected` has notified `done` for the tick
+/// at `sim_time_s`, and every restarted process has reported ready.
+///
+/// A process that dies meanwhile is handled by the run's policy: with
+/// `restart` it is started again, and when it reports ready it is woken to
+/// take the step it owes (never before: a wake-up sent to a process whose
+/// ports do not exist yet would be lost, one sent to a process that is
+/// still starting would make it step twice).
 pub(crate) fn wait_done(
     ports: &mut Ports,
     sup: &mut Supervisor,
@@ -494,40 +585,47 @@ pub(crate) fn wait_done(
     sim_time_s: f64,
     spin: Duration,
 ) -> anyhow::Result<()> {
-    let mut pending = vec![false; procs.len()];
-    let mut remaining = 0usize;
+    let n = procs.len();
+    let mut t = Tally {
+        n,
+        pending: vec![false; n],
+        remaining: 0,
+        ready: Vec::new(),
+    };
     for &i in expected {
-        if !pending[i] {
-            pending[i] = true;
-            remaining += 1;
+        if !t.pending[i] {
+            t.pending[i] = true;
+            t.remaining += 1;
         }
     }
-    let start = Instant::now();
+    let mut start = Instant::now();
     let slice = Duration::from_millis(50);
     // Adaptive wait: poll first, for at most the spin budget.
-    while remaining > 0 && start.elapsed() < spin {
-        let _ = ports.done.try_wait(|ev| {
-            let id = ev.id.as_value();
-            if id < pending.len() && pending[id] {
-                pending[id] = false;
-                remaining -= 1;
-            }
-        });
+    while t.remaining > 0 && start.elapsed() < spin {
+        let _ = ports.done.try_wait(|ev| t.on(ev.id.as_value()));
         std::hint::spin_loop();
     }
-    while remaining > 0 {
+    loop {
+        // A restarted process that is ready takes the step it owes.
+        for i in std::mem::take(&mut t.ready) {
+            if ports
+                .recovery
+                .ready(i, procs, &mut ports.journal, sim_time_s)
+                && t.pending[i]
+            {
+                // Its clock subscriber gets the tick in progress, then the wake-up.
+                ports.clock.update_connections()?;
+                ports.wakes[i]
+                    .notify()
+                    .map_err(|e| anyhow::anyhow!("wake {}: {e:?}", procs[i].label()))?;
+            }
+        }
+        if t.remaining == 0 && !ports.recovery.any_awaiting() {
+            break;
+        }
         ports
             .done
-            .timed_wait(
-                |ev| {
-                    let id = ev.id.as_value();
-                    if id < pending.len() && pending[id] {
-                        pending[id] = false;
-                        remaining -= 1;
-                    }
-                },
-                slice,
-            )
+            .timed_wait(|ev| t.on(ev.id.as_value()), slice)
             .map_err(|e| match e {
                 // A signal that lands inside the blocking wait ends it early.
                 ListenerWaitError::InterruptSignal => anyhow::Error::from(RunError::Interrupted(
@@ -535,28 +633,31 @@ pub(crate) fn wait_done(
                 )),
                 other => anyhow::anyhow!("waiting for done: {other:?}"),
             })?;
-        if remaining == 0 {
+        if t.remaining == 0 && t.ready.is_empty() && !ports.recovery.any_awaiting() {
             break;
         }
         if let Some(sig) = termination_requested() {
             return Err(RunError::Interrupted(sig).into());
         }
-        if let Some(d) = sup.reap().into_iter().next() {
-            sup.events.push(serde_json::json!({
-                "t_s": sim_time_s,
-                "event": "process_died",
-                "process": d.label,
-                "exit": d.exit.describe(),
-                "policy": "abort",
-            }));
-            return Err(RunError::ChildDied(d).into());
+        for d in sup.reap() {
+            ports.handle_death(d, procs, sup, sim_time_s)?;
+            // The tick starts over for the restarted process.
+            start = Instant::now();
         }
-        if start.elapsed() > timeout {
-            let waiting = procs
-                .iter()
-                .filter(|p| pending[p.index])
-                .map(|p| p.label())
-                .collect();
+        let overdue = ports.recovery.overdue(procs);
+        if !overdue.is_empty() || start.elapsed() > timeout {
+            let waiting: Vec<String> = if overdue.is_empty() {
+                procs
+                    .iter()
+                    .filter(|p| t.pending[p.index])
+                    .map(|p| p.label())
+                    .collect()
+            } else {
+                overdue
+            };
+            let mut h = Happening::new(EventKind::RunAborted, sim_time_s, None);
+            h.detail = format!("no progress: still waiting for {waiting:?}");
+            ports.journal.emit(h, serde_json::json!({}));
             return Err(RunError::Hung {
                 timeout_s: timeout.as_secs_f64(),
                 sim_time_s,

@@ -21,6 +21,8 @@ pub struct ChildProc {
     pub log: PathBuf,
     /// How it ended, once reaped.
     pub exit: Option<ExitInfo>,
+    /// 0 for the first process of its index, n for its n-th restart.
+    pub incarnation: u32,
 }
 
 /// Every child of a run.
@@ -32,13 +34,13 @@ pub struct Supervisor {
     stopping: bool,
     /// Signals to send later: `(when, pid, signal)` (the end of a stall).
     timers: Vec<(Instant, i32, i32)>,
-    /// What happened to the run's processes: injected faults, deaths.
-    pub events: Vec<serde_json::Value>,
 }
 
 /// A child that ended while the run needed it.
 #[derive(Debug, Clone)]
 pub struct Death {
+    /// Index of the process in the run.
+    pub index: usize,
     /// `vehicle/kind`.
     pub label: String,
     /// How it ended.
@@ -56,7 +58,43 @@ impl Supervisor {
         args: &[String],
         log: &Path,
     ) -> std::io::Result<()> {
-        let out = File::create(log)?;
+        self.launch(spec, binary, args, log, 0)
+    }
+
+    /// Starts process `spec` again after it died (its `incarnation`-th
+    /// restart); its log goes on in the same file after a marker line.
+    pub fn respawn(
+        &mut self,
+        spec: &ProcessSpec,
+        binary: &Path,
+        args: &[String],
+        log: &Path,
+        incarnation: u32,
+    ) -> std::io::Result<()> {
+        self.launch(spec, binary, args, log, incarnation)
+    }
+
+    fn launch(
+        &mut self,
+        spec: &ProcessSpec,
+        binary: &Path,
+        args: &[String],
+        log: &Path,
+        incarnation: u32,
+    ) -> std::io::Result<()> {
+        let mut out = if incarnation == 0 {
+            File::create(log)?
+        } else {
+            File::options().append(true).create(true).open(log)?
+        };
+        if incarnation > 0 {
+            use std::io::Write;
+            writeln!(
+                out,
+                "--- shoal: restart {incarnation} of {} ---",
+                spec.label()
+            )?;
+        }
         let err = out.try_clone()?;
         let mut cmd = Command::new(binary);
         cmd.args(args)
@@ -74,8 +112,20 @@ impl Supervisor {
             pid,
             log: log.to_path_buf(),
             exit: None,
+            incarnation,
         });
         Ok(())
+    }
+
+    /// The latest child of each process index (the one a restart replaced
+    /// is left out).
+    pub fn latest(&self) -> impl Iterator<Item = &ChildProc> {
+        self.children.iter().filter(|c| {
+            !self
+                .children
+                .iter()
+                .any(|o| o.spec.index == c.spec.index && o.incarnation > c.incarnation)
+        })
     }
 
     /// All children.
@@ -116,6 +166,7 @@ impl Supervisor {
                 c.exit = Some(info);
                 if !self.stopping {
                     deaths.push(Death {
+                        index: c.spec.index,
                         label: c.spec.label(),
                         exit: info,
                         log_tail: tail(&c.log, 12),

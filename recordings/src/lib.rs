@@ -26,7 +26,7 @@ mod scan;
 mod writer;
 
 pub use reader::{ChannelStats, InspectReport, Recording, RecordingError, StoredMessage};
-pub use recover::{recover, RecoverError, RecoverReport};
+pub use recover::{merge, recover, RecoverError, RecoverReport};
 pub use registry::{all_types, type_info_by_schema, TypeInfo};
 pub use writer::{Compression, RecordingWriter, WriterError, WriterOptions, CDR_HEADER};
 

@@ -94,13 +94,30 @@ pub struct RecoverReport {
 /// the input's compression. The copy is written beside `output` under a
 /// temporary name, read back and checked, then moved into place.
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverError> {
+    merge(&[input], output)
+}
+
+/// Joins recordings written one after the other (a recorder that was
+/// restarted during a run writes a new file each time) into one complete
+/// MCAP file at `output`, like [`recover`] does for one: each input is read
+/// up to its last complete chunk. Channels and schemas are matched by topic
+/// and name; a message that an earlier input holds already (same channel,
+/// log time and sequence: a restarted recorder receives the publishers'
+/// history again) is written once. Metadata records are kept once per name
+/// (the first). The report's byte counts add up over the inputs; its
+/// `input` names them joined by ` + `.
+pub fn merge(inputs: &[&Path], output: &Path) -> Result<RecoverReport, RecoverError> {
     if output.exists() {
         return Err(RecoverError::Exists(output.to_path_buf()));
     }
-    let bytes = std::fs::read(input).map_err(|source| RecoverError::Read {
-        path: input.to_path_buf(),
-        source,
-    })?;
+    let mut all = Vec::with_capacity(inputs.len());
+    for input in inputs {
+        let bytes = std::fs::read(input).map_err(|source| RecoverError::Read {
+            path: input.to_path_buf(),
+            source,
+        })?;
+        all.push((input.to_path_buf(), bytes));
+    }
     let mut name = output.file_name().unwrap_or_default().to_os_string();
     name.push(".partial");
     let tmp = output.with_file_name(name);
@@ -112,7 +129,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
             path: tmp.clone(),
             source,
         })?;
-    let result = copy(input, &bytes, file, output).and_then(|mut report| {
+    let result = copy(&all, file, output).and_then(|mut report| {
         report.output_bytes = verify(&tmp, &report)?;
         // Hard link then unlink: fails rather than replace an output that
         // appeared meanwhile.
@@ -132,24 +149,30 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
     result
 }
 
-/// Writes the copy into `file`; the report names `output`.
+/// Writes the copy of `inputs` (path, bytes), in order, into `file`; the
+/// report names `output`.
 fn copy(
-    input: &Path,
-    bytes: &[u8],
+    inputs: &[(PathBuf, Vec<u8>)],
     file: File,
     output: &Path,
 ) -> Result<RecoverReport, RecoverError> {
-    // First pass: what is there (the profile and compression go in the
-    // copy's header and options).
+    // First pass over the first input: the profile and compression go in
+    // the copy's header and options.
+    let Some((first_path, first)) = inputs.first() else {
+        return Err(RecoverError::Unreadable {
+            path: output.to_path_buf(),
+            reason: "no input".into(),
+        });
+    };
     let mut profile = String::new();
-    let probe = scan(bytes, |item| {
+    let probe = scan(first, |item| {
         if let Item::Header { profile: p } = item {
             profile = p;
         }
     });
     if probe.good_end <= mcap::MAGIC.len() {
         return Err(RecoverError::Unreadable {
-            path: input.to_path_buf(),
+            path: first_path.clone(),
             reason: probe
                 .error
                 .unwrap_or_else(|| "no record after the magic".into()),
@@ -167,15 +190,17 @@ fn copy(
         .library(format!("shoal recover {}", env!("CARGO_PKG_VERSION")))
         .create(BufWriter::with_capacity(1 << 20, file))?;
 
-    let mut schema_ids: HashMap<u16, u16> = HashMap::new();
-    let mut channel_ids: HashMap<u16, u16> = HashMap::new();
     let mut report = RecoverReport {
-        input: input.display().to_string(),
+        input: inputs
+            .iter()
+            .map(|(p, _)| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(" + "),
         output: output.display().to_string(),
-        input_bytes: bytes.len() as u64,
+        input_bytes: 0,
         kept_bytes: 0,
         dropped_bytes: 0,
-        data_section_complete: false,
+        data_section_complete: true,
         input_truncated: false,
         stop_reason: None,
         chunks: 0,
@@ -185,76 +210,125 @@ fn copy(
         messages: 0,
         output_bytes: 0,
     };
-    let mut failure: Option<mcap::McapError> = None;
-    let end = scan(bytes, |item| {
-        if failure.is_some() {
-            return;
-        }
-        let step = (|| -> Result<(), mcap::McapError> {
-            match item {
-                Item::Header { .. } => {}
-                Item::Schema(s) => {
-                    if let std::collections::hash_map::Entry::Vacant(e) = schema_ids.entry(s.id) {
-                        e.insert(writer.add_schema(&s.name, &s.encoding, &s.data)?);
-                        report.schemas += 1;
-                    }
-                }
-                Item::Channel(c) => {
-                    if channel_ids.contains_key(&c.id) {
-                        return Ok(());
-                    }
-                    // Schema id 0 means "no schema"; an unknown one is dropped to 0.
-                    let schema = schema_ids.get(&c.schema_id).copied().unwrap_or(0);
-                    let id =
-                        writer.add_channel(schema, &c.topic, &c.message_encoding, &c.metadata)?;
-                    channel_ids.insert(c.id, id);
-                    report.channels += 1;
-                }
-                Item::Message(m) => {
-                    // A message of a channel never declared cannot be written.
-                    if let Some(&id) = channel_ids.get(&m.channel_id) {
-                        writer.write_to_known_channel(
-                            &mcap::records::MessageHeader {
-                                channel_id: id,
-                                sequence: m.sequence,
-                                log_time: m.log_time,
-                                publish_time: m.publish_time,
-                            },
-                            &m.data,
-                        )?;
-                        report.messages += 1;
-                    }
-                }
-                Item::Metadata { name, values } => {
-                    writer.write_metadata(&mcap::records::Metadata {
-                        name,
-                        metadata: values,
-                    })?;
-                    report.metadata += 1;
-                }
+    // Output ids by schema name and by topic, shared by all inputs.
+    let mut schemas_by_name: HashMap<String, u16> = HashMap::new();
+    let mut channels_by_topic: HashMap<String, u16> = HashMap::new();
+    // Per output channel: (log time, sequence) of the last message an
+    // earlier input wrote.
+    let mut written_before: HashMap<u16, (u64, u32)> = HashMap::new();
+    let mut metadata_names: std::collections::HashSet<String> = Default::default();
+    for (path, bytes) in inputs {
+        let mut schema_ids: HashMap<u16, u16> = HashMap::new();
+        let mut channel_ids: HashMap<u16, u16> = HashMap::new();
+        let mut written_now: HashMap<u16, (u64, u32)> = HashMap::new();
+        let mut failure: Option<mcap::McapError> = None;
+        let end = scan(bytes, |item| {
+            if failure.is_some() {
+                return;
             }
-            Ok(())
-        })();
-        if let Err(e) = step {
-            failure = Some(e);
+            let step = (|| -> Result<(), mcap::McapError> {
+                match item {
+                    Item::Header { .. } => {}
+                    Item::Schema(s) => {
+                        if let std::collections::hash_map::Entry::Vacant(e) = schema_ids.entry(s.id)
+                        {
+                            let id = match schemas_by_name.get(&s.name) {
+                                Some(&id) => id,
+                                None => {
+                                    let id = writer.add_schema(&s.name, &s.encoding, &s.data)?;
+                                    schemas_by_name.insert(s.name.clone(), id);
+                                    report.schemas += 1;
+                                    id
+                                }
+                            };
+                            e.insert(id);
+                        }
+                    }
+                    Item::Channel(c) => {
+                        if channel_ids.contains_key(&c.id) {
+                            return Ok(());
+                        }
+                        let id = match channels_by_topic.get(&c.topic) {
+                            Some(&id) => id,
+                            None => {
+                                // Schema id 0 means "no schema"; an unknown one is dropped to 0.
+                                let schema = schema_ids.get(&c.schema_id).copied().unwrap_or(0);
+                                let id = writer.add_channel(
+                                    schema,
+                                    &c.topic,
+                                    &c.message_encoding,
+                                    &c.metadata,
+                                )?;
+                                channels_by_topic.insert(c.topic.clone(), id);
+                                report.channels += 1;
+                                id
+                            }
+                        };
+                        channel_ids.insert(c.id, id);
+                    }
+                    Item::Message(m) => {
+                        // A message of a channel never declared cannot be written.
+                        if let Some(&id) = channel_ids.get(&m.channel_id) {
+                            let key = (m.log_time, m.sequence);
+                            if written_before.get(&id).is_some_and(|last| key <= *last) {
+                                return Ok(());
+                            }
+                            writer.write_to_known_channel(
+                                &mcap::records::MessageHeader {
+                                    channel_id: id,
+                                    sequence: m.sequence,
+                                    log_time: m.log_time,
+                                    publish_time: m.publish_time,
+                                },
+                                &m.data,
+                            )?;
+                            let last = written_now.entry(id).or_insert(key);
+                            *last = (*last).max(key);
+                            report.messages += 1;
+                        }
+                    }
+                    Item::Metadata { name, values } => {
+                        if metadata_names.insert(name.clone()) {
+                            writer.write_metadata(&mcap::records::Metadata {
+                                name,
+                                metadata: values,
+                            })?;
+                            report.metadata += 1;
+                        }
+                    }
+                }
+                Ok(())
+            })();
+            if let Err(e) = step {
+                failure = Some(e);
+            }
+        });
+        if let Some(e) = failure {
+            return Err(e.into());
         }
-    });
-    if let Some(e) = failure {
-        return Err(e.into());
+        for (id, key) in written_now {
+            let last = written_before.entry(id).or_insert(key);
+            *last = (*last).max(key);
+        }
+        let complete = bytes.len() >= 16 && bytes[bytes.len() - 8..] == *mcap::MAGIC;
+        report.input_bytes += bytes.len() as u64;
+        report.kept_bytes += end.good_end as u64;
+        if !end.data_end {
+            report.dropped_bytes += (bytes.len() - end.good_end) as u64;
+        }
+        report.data_section_complete &= end.data_end;
+        report.input_truncated |= !complete || !end.data_end || end.error.is_some();
+        if let Some(e) = end.error {
+            report.stop_reason.get_or_insert(if inputs.len() > 1 {
+                format!("{}: {e}", path.display())
+            } else {
+                e
+            });
+        }
+        report.chunks += end.chunks;
     }
     writer.finish()?;
     drop(writer);
-    let complete = bytes.len() >= 16 && bytes[bytes.len() - 8..] == *mcap::MAGIC;
-    report.kept_bytes = end.good_end as u64;
-    report.dropped_bytes = if end.data_end {
-        0
-    } else {
-        (bytes.len() - end.good_end) as u64
-    };
-    report.data_section_complete = end.data_end;
-    report.input_truncated = !complete || !end.data_end || end.error.is_some();
-    report.stop_reason = end.error;
-    report.chunks = end.chunks;
     Ok(report)
 }
 

@@ -57,6 +57,7 @@ pub fn all_types() -> Vec<TypeInfo> {
         type_info::<MpcStats>(),
         type_info::<Clock>(),
         type_info::<ProcessStats>(),
+        type_info::<Event>(),
     ]
 }
 

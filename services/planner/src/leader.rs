@@ -212,6 +212,8 @@ pub struct LeaderPlanner {
     memory: Vec<MemPoint>,
     /// Scratch: cross-track positions of the returns in the window.
     window: Vec<f64>,
+    /// Joins a mission in progress (a restarted planner): see [`Self::resume`].
+    resuming: bool,
 }
 
 impl LeaderPlanner {
@@ -235,8 +237,19 @@ impl LeaderPlanner {
             nav: PositionFilter::new(cfg.position_fix_noise_m, cfg.dead_reckoning_noise_mps),
             memory: Vec::with_capacity(LEADER_MEMORY_CAPACITY),
             window: Vec::with_capacity(LEADER_MEMORY_CAPACITY),
+            resuming: false,
             cfg: cfg.clone(),
         })
+    }
+
+    /// Makes this planner join a mission already under way (the orchestrator
+    /// restarted it): at its first step it skips the waypoints the vehicle
+    /// has passed (those it is more than the acceptance radius beyond, along
+    /// the next leg) and starts its
+    /// speed command from the vehicle's speed along the track instead of
+    /// from rest, so the group behind it sees no sudden stop.
+    pub fn resume(&mut self) {
+        self.resuming = true;
     }
 
     /// The configuration.
@@ -284,7 +297,22 @@ impl LeaderPlanner {
         self.path.push(*pos);
         self.wp_of.push(0);
         self.cum.push(0.0);
-        for (j, w) in self.cfg.waypoints_ned_m.iter().enumerate() {
+        let wps = &self.cfg.waypoints_ned_m;
+        // Resuming: waypoint j is behind when the vehicle is more than the
+        // acceptance radius beyond it along leg j → j+1.
+        let passed = |j: usize| {
+            let (w, next) = (Vector3::from(wps[j]), Vector3::from(wps[j + 1]));
+            let t = (next - w) / (next - w).norm().max(1e-9);
+            (pos - w).dot(&t) > self.cfg.acceptance_radius_m
+        };
+        let first = if self.resuming {
+            (0..wps.len().saturating_sub(1))
+                .take_while(|&j| passed(j))
+                .count()
+        } else {
+            0
+        };
+        for (j, w) in self.cfg.waypoints_ned_m.iter().enumerate().skip(first) {
             let w = Vector3::from(*w);
             if let Some(last) = self.path.last().copied() {
                 let l = (w - last).norm();
@@ -362,6 +390,10 @@ impl LeaderPlanner {
             .step(dt, &att, &v_body, &input.position_ned_m, input.depth_m);
         if first {
             self.start(&pos);
+            if self.resuming && self.path.len() >= 2 {
+                let (tg, _) = self.frame(0);
+                self.v_cmd = (att * v_body).dot(&tg).clamp(0.0, self.cfg.speed_mps);
+            }
         } else if self.leg == 0 && self.done.is_none() {
             self.reanchor_start();
         }

@@ -68,7 +68,11 @@ impl PlannerTask {
             if let Some(n) = nav.position_noise_m.filter(|n| *n > 0.0) {
                 cfg.position_fix_noise_m = n;
             }
-            Role::Leader(LeaderPlanner::new(&cfg)?)
+            let mut planner = LeaderPlanner::new(&cfg)?;
+            if rt.args().restart > 0 {
+                planner.resume();
+            }
+            Role::Leader(planner)
         } else {
             Role::Follower {
                 planner: FollowerPlanner::new(&follower_config(scenario, me)?)?,

@@ -315,3 +315,48 @@ fn leader_ramps_its_speed_up() {
         "cruise speed reached: {prev}"
     );
 }
+
+#[test]
+fn restarted_leader_carries_on_where_the_old_one_was() {
+    let cfg = LeaderConfig {
+        waypoints_ned_m: vec![[30.0, 0.0, 10.0], [30.0, 30.0, 12.0], [0.0, 30.0, 10.0]],
+        ..LeaderConfig::default()
+    };
+    // The first planner flies until it is well along the second leg.
+    let mut l = Leader::new(&cfg, &[]);
+    let mut before = None;
+    for _ in 0..2000 {
+        let out = l.step();
+        if out.state.waypoint_index == 1 && l.pos.y > 10.0 {
+            before = Some(out);
+            break;
+        }
+    }
+    let before = before.expect("never reached the second leg");
+    let speed = before.target.velocity_mps.norm();
+    assert!(speed > 0.5, "cruising at {speed} m/s");
+
+    // (the resumed one goes first: the fixture moves the vehicle as told)
+    // A cold planner would head back to the first waypoint from rest...
+    let mut cold = LeaderPlanner::new(&cfg).unwrap();
+    // ...a resumed one heads for the second, at the vehicle's speed.
+    let mut resumed = LeaderPlanner::new(&cfg).unwrap();
+    resumed.resume();
+    l.t += DT;
+    for (p, resume) in [(&mut resumed, true), (&mut cold, false)] {
+        std::mem::swap(&mut l.planner, p);
+        let out = l.step();
+        std::mem::swap(&mut l.planner, p);
+        if resume {
+            assert_eq!(out.state.waypoint_index, 1);
+            let v = out.target.velocity_mps.norm();
+            assert!(
+                (v - speed).abs() < 0.1,
+                "resumed at {v} m/s, was {speed} m/s"
+            );
+        } else {
+            assert_eq!(out.state.waypoint_index, 0);
+            assert!(out.target.velocity_mps.norm() < 0.05);
+        }
+    }
+}

@@ -143,6 +143,14 @@ impl RecorderTask {
             &shoal_runtime::stats::stats_limits(rt.args().processes),
             4,
         )?);
+        taps.push(open_tap::<ipc_types::Event>(
+            rt,
+            &mut writer,
+            &ipc_types::run_service_name(&run, RunChannel::Events),
+            "/events",
+            &ChannelLimits::events(),
+            shoal_runtime::EVENTS_HISTORY,
+        )?);
         for v in &scenario.vehicles {
             for ch in Channel::ALL {
                 if ch.follower_only() && v.parent.is_none() {

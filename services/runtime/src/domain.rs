@@ -152,6 +152,9 @@ pub struct ChannelLimits {
 /// reader, `shoal replay`, tests).
 pub const SPARE_SUBSCRIBERS: usize = 4;
 
+/// Events kept on the `events` channel for late joiners.
+pub const EVENTS_HISTORY: usize = 16;
+
 /// Subscriber buffer of the recorder: it drains once per lockstep frame or
 /// realtime wake-up, so it must hold everything a publisher sends meanwhile.
 pub const RECORDER_BUFFER: usize = 16;
@@ -190,6 +193,20 @@ impl ChannelLimits {
             max_nodes: subs + 1,
             max_buffer: 2,
             history: 1,
+        }
+    }
+
+    /// The run's `events`: the orchestrator publishes, the recorder (and
+    /// outside clients) read; the last 16 are kept for a reader that joins
+    /// late (a restarted recorder records the death that restarted it).
+    pub fn events() -> Self {
+        let subs = 1 + SPARE_SUBSCRIBERS;
+        Self {
+            max_publishers: 1,
+            max_subscribers: subs,
+            max_nodes: subs + 2,
+            max_buffer: EVENTS_HISTORY,
+            history: EVENTS_HISTORY,
         }
     }
 

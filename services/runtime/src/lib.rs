@@ -44,7 +44,7 @@ use ipc_types::{Clock, RunChannel};
 
 pub use domain::{
     cleanup_domain, iceoryx_config, list_domain_files, stale_domains, sweep_stale_domains,
-    ChannelLimits,
+    ChannelLimits, EVENTS_HISTORY,
 };
 pub use latency::LatencyRecorder;
 pub use ports::{Publisher, Subscriber};
@@ -108,6 +108,17 @@ pub struct RunArgs {
     /// before blocking, µs (0 = always block). Only worth it with spare cores.
     #[arg(long, default_value_t = 0)]
     pub spin_us: u64,
+    /// How many times the orchestrator has restarted this process (0 at the
+    /// start of the run). A restarted process joins a run in progress: in
+    /// realtime it starts at its next activation instead of counting the
+    /// ones before it as missed.
+    #[arg(long, default_value_t = 0)]
+    pub restart: u32,
+    /// State handed over by the orchestrator to a restarted process (a file
+    /// whose meaning is the service's: sim-plant takes its vehicle's last
+    /// `truth` sample).
+    #[arg(long)]
+    pub resume: Option<std::path::PathBuf>,
 }
 
 /// Errors of the runtime.
@@ -324,6 +335,24 @@ impl Runtime {
             })
     }
 
+    /// Tells the orchestrator that every port of this process exists: the
+    /// `done` event with id [`ready_event_id`] (distinct from a finished
+    /// step's, so a restarted process's "ready" is never taken for a step).
+    fn notify_ready(
+        &self,
+        done: &iceoryx2::port::notifier::Notifier<ipc::Service>,
+    ) -> Result<(), RuntimeError> {
+        done.notify_with_custom_event_id(EventId::new(ready_event_id(
+            self.args.index,
+            self.args.processes,
+        )))
+        .map(|_| ())
+        .map_err(|e| RuntimeError::Io {
+            service: "done".into(),
+            reason: format!("{e:?}"),
+        })
+    }
+
     fn run_lockstep<T: Task>(
         &self,
         mut task: T,
@@ -356,10 +385,7 @@ impl Runtime {
         )?;
         let done = self.done_notifier()?;
         // Ready: every port of this process exists, so the first tick's samples reach it.
-        done.notify().map_err(|e| RuntimeError::Io {
-            service: "done".into(),
-            reason: format!("{e:?}"),
-        })?;
+        self.notify_ready(&done)?;
 
         let waitset = WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
@@ -467,10 +493,7 @@ impl Runtime {
         report: &mut RunReport,
     ) -> Result<(), RuntimeError> {
         let done = self.done_notifier()?;
-        done.notify().map_err(|e| RuntimeError::Io {
-            service: "done".into(),
-            reason: format!("{e:?}"),
-        })?;
+        self.notify_ready(&done)?;
         let period_ns = (self.args.period_s.max(1e-4) * 1e9).round() as u64;
         let phase_ns = (self.args.phase_s.max(0.0) * 1e9).round() as u64;
         let epoch = if self.args.epoch_mono_ns == 0 {
@@ -478,7 +501,14 @@ impl Runtime {
         } else {
             self.args.epoch_mono_ns
         };
-        let mut k = 0u64;
+        // A restarted process joins at its next activation.
+        let mut k = if self.args.restart > 0 {
+            mono_ns()
+                .saturating_sub(epoch + phase_ns)
+                .div_ceil(period_ns)
+        } else {
+            0
+        };
         let mut last_sim: Option<u64> = None;
         loop {
             let due = epoch + phase_ns + k * period_ns;
@@ -547,7 +577,14 @@ pub struct ServiceCli {
     pub scenario: std::path::PathBuf,
 }
 
-/// Opens the `done` event service of a run (same limits for every opener).
+/// Event id of process `index`'s "ready" on the `done` service (a finished
+/// lockstep step is `index` itself).
+pub const fn ready_event_id(index: usize, processes: usize) -> usize {
+    processes + index
+}
+
+/// Opens the `done` event service of a run (same limits for every opener):
+/// ids `0..processes` are finished steps, `processes..2·processes` readies.
 pub fn open_done(
     node: &Node<ipc::Service>,
     run_id: &str,
@@ -560,7 +597,7 @@ pub fn open_done(
         .max_notifiers(limits.max_publishers)
         .max_listeners(limits.max_subscribers)
         .max_nodes(limits.max_nodes)
-        .event_id_max_value(processes.max(1))
+        .event_id_max_value(2 * processes.max(1))
         .open_or_create()
         .map_err(|e| RuntimeError::Service {
             service: name,

@@ -254,6 +254,20 @@ impl<T: Sample> Publisher<T> {
         }
     }
 
+    /// Connects the subscribers that appeared since the last send and hands
+    /// them the history (otherwise a late joiner sees it only at the next
+    /// send: a restarted process must read the current clock before the
+    /// orchestrator sends another).
+    pub fn update_connections(&self) -> Result<(), RuntimeError> {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        self.inner
+            .update_connections()
+            .map_err(|e| RuntimeError::Io {
+                service: self.service.clone(),
+                reason: format!("{e:?}"),
+            })
+    }
+
     /// Sends a sample whose header is already complete (replay, the clock).
     pub fn publish_stamped(&mut self, sample: T) -> Result<(), RuntimeError> {
         self.inner

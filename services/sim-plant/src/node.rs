@@ -21,6 +21,30 @@ pub struct PlantTask {
     thrust_origin_mono_ns: u64,
     thrust_applied_mono_ns: u64,
     period_s: f64,
+    /// A restarted plant: simulated time of the `truth` it resumed from.
+    resumed_from_ns: Option<u64>,
+}
+
+/// Most plant periods a restarted plant catches up on (realtime: the
+/// vehicle coasts on its last thrust while its simulator was gone).
+const MAX_CATCH_UP_STEPS: u64 = 600;
+
+/// Reads the `truth` sample the orchestrator handed over to a restarted plant.
+fn read_resume(path: &std::path::Path) -> anyhow::Result<Truth> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    if bytes.len() != std::mem::size_of::<Truth>() {
+        anyhow::bail!(
+            "{}: {} bytes, a truth sample has {}",
+            path.display(),
+            bytes.len(),
+            std::mem::size_of::<Truth>()
+        );
+    }
+    let t: Truth = bytemuck::pod_read_unaligned(&bytes);
+    if !t.is_finite() {
+        anyhow::bail!("{}: the handed-over truth is not finite", path.display());
+    }
+    Ok(t)
 }
 
 impl PlantTask {
@@ -33,10 +57,32 @@ impl PlantTask {
         let cfg: PlantConfig = scenario.section("plant")?;
         let nav_cfg: NavConfig = scenario.section("nav")?;
         let (p, yaw) = scenario.start_poses()[me];
-        let initial = PlantState::at_rest(
+        let mut initial = PlantState::at_rest(
             Vector3::from(p),
             UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
         );
+        // A restarted plant carries on from its vehicle's last truth.
+        let resumed = rt.args().resume.as_deref().map(read_resume).transpose()?;
+        let mut tau = Vector6::zeros();
+        if let Some(t) = &resumed {
+            initial = PlantState {
+                position_ned_m: Vector3::from(t.position_ned_m),
+                attitude: shoal_runtime::convert::quat(t.q_body_to_ned_wxyz),
+                nu: Vector6::new(
+                    t.velocity_body_mps[0],
+                    t.velocity_body_mps[1],
+                    t.velocity_body_mps[2],
+                    t.rates_body_radps[0],
+                    t.rates_body_radps[1],
+                    t.rates_body_radps[2],
+                ),
+            };
+            tau = Vector6::from(t.tau_applied);
+            tracing::info!(
+                t_s = t.header.sim_time_ns as f64 * 1e-9,
+                "resuming from the handed-over truth"
+            );
+        }
         let run = &rt.args().run_id;
         let lim = ChannelLimits::vehicle();
         Ok(Self {
@@ -50,16 +96,28 @@ impl PlantTask {
             )?,
             truth_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Truth), &lim)?,
             nav_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Nav), &lim)?,
-            tau: Vector6::zeros(),
+            tau,
             thrust_origin_mono_ns: 0,
             thrust_applied_mono_ns: 0,
             period_s: 1.0 / scenario.rates.plant_hz,
+            resumed_from_ns: resumed.map(|t| t.header.sim_time_ns),
         })
     }
 }
 
 impl Task for PlantTask {
     fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        // Resumed: the handed-over truth is the state at the start of its
+        // step; the steps from there to now ran with its applied thrust.
+        if let Some(from) = self.resumed_from_ns.take() {
+            let period_ns = (self.period_s * 1e9).round().max(1.0) as u64;
+            let steps = (ctx.sim_time_ns.saturating_sub(from) + period_ns / 2) / period_ns;
+            for _ in 0..steps.min(MAX_CATCH_UP_STEPS) {
+                self.plant
+                    .advance(&self.tau, self.period_s)
+                    .map_err(TaskError::from_display)?;
+            }
+        }
         if let Some(t) = self.thrust_in.latest(ctx)? {
             self.tau = Vector6::from(t.tau);
             self.thrust_origin_mono_ns = t.header.origin_mono_ns;
