@@ -4,6 +4,7 @@
 
 mod bench_ipc;
 mod bench_run;
+mod bench_scale;
 mod check;
 mod compare;
 mod export;
@@ -76,6 +77,9 @@ enum BenchCmd {
     /// Real-time factor and CPU time of a scenario in lockstep (blocking and
     /// adaptive waits), end-to-end latency in realtime mode.
     Run(bench_run::RunBenchCmd),
+    /// Cost against group size: N = 5, 25, 50, 100 in lockstep (processes,
+    /// real-time factor, CPU per vehicle-second, memory, recorder rate).
+    Scale(bench_scale::ScaleCmd),
 }
 
 #[derive(Debug, clap::Args)]
@@ -364,6 +368,7 @@ fn main() -> ExitCode {
         Cmd::Replay(cmd) => replay::run(cmd),
         Cmd::Bench(BenchCmd::Ipc(cmd)) => bench_ipc::run(cmd),
         Cmd::Bench(BenchCmd::Run(cmd)) => bench_run::run(cmd),
+        Cmd::Bench(BenchCmd::Scale(cmd)) => bench_scale::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

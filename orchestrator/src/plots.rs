@@ -35,9 +35,9 @@ const FIGURES: [Fig; 6] = [
 ];
 
 /// Font family name the figures use; DejaVu Sans is registered under it.
-const FONT: &str = "sans-serif";
+pub(crate) const FONT: &str = "sans-serif";
 /// Width of every figure, px.
-const WIDTH: u32 = 1600;
+pub(crate) const WIDTH: u32 = 1600;
 /// Height of the time plots, px.
 const HEIGHT: u32 = 900;
 const MARGIN: u32 = 20;
@@ -130,7 +130,7 @@ pub fn write_plots(
 }
 
 /// Registers the embedded DejaVu Sans as [`FONT`] (once per process).
-fn register_font() -> anyhow::Result<()> {
+pub(crate) fn register_font() -> anyhow::Result<()> {
     static DONE: OnceLock<Result<(), String>> = OnceLock::new();
     DONE.get_or_init(|| {
         plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular())
@@ -366,7 +366,7 @@ impl Data {
 }
 
 /// Height reserved for the title, px.
-const TITLE_H: f64 = 56.0;
+pub(crate) const TITLE_H: f64 = 56.0;
 
 #[derive(Default)]
 struct Bounds {
@@ -492,10 +492,10 @@ fn hull(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
     h
 }
 
-fn caption_style() -> TextStyle<'static> {
+pub(crate) fn caption_style() -> TextStyle<'static> {
     (FONT, 30).into_font().color(&BLACK)
 }
-fn subtitle_style() -> TextStyle<'static> {
+pub(crate) fn subtitle_style() -> TextStyle<'static> {
     (FONT, 24).into_font().color(&BLACK)
 }
 fn desc_style() -> TextStyle<'static> {
@@ -504,12 +504,12 @@ fn desc_style() -> TextStyle<'static> {
 fn tick_style() -> TextStyle<'static> {
     (FONT, 18).into_font().color(&BLACK)
 }
-fn legend_style() -> TextStyle<'static> {
+pub(crate) fn legend_style() -> TextStyle<'static> {
     (FONT, 20).into_font().color(&BLACK)
 }
 
 /// A tick label: no trailing `.0`, no `-0`.
-fn num(v: f64) -> String {
+pub(crate) fn num(v: f64) -> String {
     let r = (v * 1000.0).round() / 1000.0 + 0.0;
     if r == r.trunc() {
         format!("{r:.0}")
@@ -536,7 +536,7 @@ where
 }
 
 /// Draws `text` centred in a band of `h` px at the top; returns the area below.
-fn titled<DB: DrawingBackend>(
+pub(crate) fn titled<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     text: &str,
     h: u32,
@@ -570,7 +570,7 @@ fn plot_px((w, h): (u32, u32)) -> (f64, f64) {
     )
 }
 
-fn chart<'a, 'b, DB: DrawingBackend>(area: &'a DrawingArea<DB, Shift>) -> ChartBuilder<'a, 'b, DB> {
+pub(crate) fn chart<'a, 'b, DB: DrawingBackend>(area: &'a DrawingArea<DB, Shift>) -> ChartBuilder<'a, 'b, DB> {
     let mut b = ChartBuilder::on(area);
     b.margin_top(MARGIN)
         .margin_bottom(MARGIN)
@@ -581,11 +581,11 @@ fn chart<'a, 'b, DB: DrawingBackend>(area: &'a DrawingArea<DB, Shift>) -> ChartB
     b
 }
 
-type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+pub(crate) type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// Grid, ticks and axis names; `negate_y` labels the vertical axis with −y
 /// (axes that grow downwards are plotted negated).
-fn mesh<'a, DB: DrawingBackend + 'a>(
+pub(crate) fn mesh<'a, DB: DrawingBackend + 'a>(
     c: &mut Chart<'a, DB>,
     x_desc: &str,
     y_desc: &str,
@@ -612,7 +612,7 @@ where
 
 /// How a legend entry is keyed.
 #[derive(Debug, Clone, Copy)]
-enum Key {
+pub(crate) enum Key {
     Line(RGBColor, u32),
     Dashed(RGBColor, u32, i32, i32),
     Fill(RGBColor),
@@ -621,10 +621,10 @@ enum Key {
 }
 
 /// Legend entries, in drawing order.
-type Legend = Vec<(String, Key)>;
+pub(crate) type Legend = Vec<(String, Key)>;
 
 /// Splits an area into the plot (left) and the legend column (right).
-fn split_legend<DB: DrawingBackend>(
+pub(crate) fn split_legend<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
 ) -> (DrawingArea<DB, Shift>, DrawingArea<DB, Shift>) {
     let (w, _) = area.dim_in_pixel();
@@ -632,7 +632,7 @@ fn split_legend<DB: DrawingBackend>(
 }
 
 /// Draws the legend in its column, top-aligned with the plot.
-fn draw_legend<DB: DrawingBackend>(
+pub(crate) fn draw_legend<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     entries: &Legend,
 ) -> anyhow::Result<()>
@@ -714,7 +714,7 @@ fn thin<'a, DB: DrawingBackend + 'a>(
 }
 
 /// Draws a polyline (thinned), adding a legend entry if labelled.
-fn curve<'a, DB: DrawingBackend + 'a>(
+pub(crate) fn curve<'a, DB: DrawingBackend + 'a>(
     c: &mut Chart<'a, DB>,
     leg: &mut Legend,
     pts: impl IntoIterator<Item = (f64, f64)>,
@@ -753,7 +753,7 @@ where
 /// Draws a horizontal dashed line at `y` across `x`, adding a legend entry
 /// if labelled.
 #[allow(clippy::too_many_arguments)]
-fn hline<'a, DB: DrawingBackend + 'a>(
+pub(crate) fn hline<'a, DB: DrawingBackend + 'a>(
     c: &mut Chart<'a, DB>,
     leg: &mut Legend,
     x: &Range<f64>,

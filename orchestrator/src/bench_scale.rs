@@ -1,0 +1,1055 @@
+//! `shoal bench scale`: what a group costs as it grows (issue 8).
+//!
+//! For each group size N of `--vehicles` (default 5, 25, 50, 100) it
+//! generates a scenario with the generator of `shoal gen` (`--shape`,
+//! `--seed`), cuts it to `--duration-s` simulated seconds, checks that the
+//! machine can hold the run ([`check::needs`] / [`check::fits`]: processes,
+//! `/dev/shm`, open files) and runs it in lockstep through the same code as
+//! `shoal run`, into `OUT/nNNN/` (recording, summary.json, logs). A size the
+//! machine cannot hold is skipped with its reason in the table; a run that
+//! fails is reported and the next size still runs.
+//!
+//! Per N it reports:
+//!
+//! * **processes**: service processes spawned (the orchestrator not counted);
+//! * **real-time factor**: simulated s / wall s, first tick to last;
+//! * **CPU per vehicle-second**: user + system CPU time of every process of
+//!   the run, the orchestrator's share included (start-up and shutdown
+//!   too), divided by N × simulated s, in ms;
+//! * **peak memory**: the sum over every process (orchestrator included) of
+//!   its peak resident set, MiB. Shared pages (libraries, iceoryx2 segments)
+//!   count once per process that touched them, so this is an upper bound of
+//!   what the run occupies;
+//! * **recorder messages/s and drops**: messages in the recording (its
+//!   `shoal.recorder` metadata) per wall second, and the messages it lost;
+//! * **collisions, min pair distance, min parent visible**: from the
+//!   summary, so a fast run that went wrong shows.
+//!
+//! Then the cost ratio (CPU per vehicle-second at the largest N that ran
+//! against N = 25; issue 8 asks for ≤ 1.5). It writes `OUT/scale.md` (the
+//! table), `OUT/scale.json` (every figure) and `OUT/scale.png` /
+//! `OUT/scale.svg` (cost and real-time factor against N). Nothing fails on
+//! a figure.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use serde_json::{json, Value};
+use shoal_runtime::Mode;
+use shoal_scenario::Scenario;
+
+use crate::gen::{self, GenOptions, Shape};
+use crate::{check, plots, run, summary, sys, RunSettings};
+
+/// Issue 8: cost per vehicle-second at N = 100 at most this multiple of
+/// the cost at N = 25.
+const COST_RATIO_BOUND: f64 = 1.5;
+/// The size the cost ratio is taken against.
+const REFERENCE_N: usize = 25;
+
+/// Arguments of `shoal bench scale`.
+#[derive(Debug, clap::Args)]
+#[command(
+    long_about = "What a group costs as it grows. For each N of --vehicles, generate a scenario \
+                  as `shoal gen --vehicles N --shape SHAPE --seed SEED` does, run it in lockstep \
+                  for --duration-s simulated seconds and report: processes, real-time factor, \
+                  total CPU time per vehicle-second (every process, the orchestrator included), \
+                  peak memory (sum of every process's peak RSS), recorder messages/s and drops, \
+                  collisions, minimum pair distance and the least time a follower saw its parent. \
+                  A size the machine cannot hold (processes, /dev/shm, open files; see `shoal \
+                  check`) is skipped with the reason. Writes OUT/scale.md, OUT/scale.json and \
+                  OUT/scale.png/.svg (cost and real-time factor against N); each run stays in \
+                  OUT/nNNN/.\n\nExample: shoal bench scale --vehicles 5,25 --duration-s 20"
+)]
+pub struct ScaleCmd {
+    /// Group sizes to run, vehicles with the leader, comma-separated (each
+    /// 2 to 256; run in increasing order, duplicates once).
+    #[arg(long, value_delimiter = ',', default_value = "5,25,50,100", value_parser = parse_vehicles)]
+    pub vehicles: Vec<usize>,
+    /// Formation shape of the generated scenarios (as `shoal gen --shape`).
+    #[arg(long, value_enum, default_value_t = Shape::Triangle)]
+    pub shape: Shape,
+    /// Simulated seconds of each run (the generated scenario's own duration
+    /// is replaced; 30 s covers the start, not the gates).
+    #[arg(long, default_value_t = 30.0, value_parser = parse_duration)]
+    pub duration_s: f64,
+    /// Seed of the generator and of the scenario's noise (as `shoal gen --seed`).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output directory (default: runs/bench-scale-<unix time>); each run
+    /// goes into OUT/nNNN/.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Also draw every run's figures into OUT/nNNN/plots/ (slow for large
+    /// groups: the pair-distance figure has N(N−1)/2 curves).
+    #[arg(long)]
+    pub plots: bool,
+    /// Directory holding the service binaries (default: next to `shoal`).
+    #[arg(long)]
+    pub bin_dir: Option<PathBuf>,
+    /// Longest a lockstep tick may take before a run is declared hung, s.
+    #[arg(long, default_value_t = 30.0)]
+    pub tick_timeout: f64,
+}
+
+fn parse_vehicles(s: &str) -> Result<usize, String> {
+    let n: usize = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number of vehicles"))?;
+    if !(2..=gen::MAX_VEHICLES).contains(&n) {
+        return Err(format!(
+            "{n}: a group has 2 to {} vehicles (a leader and at least one follower)",
+            gen::MAX_VEHICLES
+        ));
+    }
+    Ok(n)
+}
+
+fn parse_duration(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(d) if d.is_finite() && d > 0.0 => Ok(d),
+        _ => Err(format!("`{s}` is not a positive number of seconds")),
+    }
+}
+
+/// The figures of one run, read from its summary.json.
+#[derive(Debug, Clone, PartialEq)]
+struct Figures {
+    /// Simulated time, s.
+    sim_s: f64,
+    /// Wall time, first tick to last, s.
+    wall_s: f64,
+    /// CPU time per process kind, the orchestrator's of this run only, s.
+    cpu_s: BTreeMap<String, f64>,
+    /// Peak RSS summed over the processes of each kind, KiB.
+    rss_kib: BTreeMap<String, i64>,
+    /// Messages in the recording.
+    recorder_messages: u64,
+    /// Messages the recorder lost.
+    recorder_dropped: u64,
+    /// Pairs that came within the collision distance.
+    collisions: u64,
+    /// Least distance between two vehicles, m.
+    min_pair_m: Option<f64>,
+    /// The scenario's safe distance, m.
+    safe_distance_m: Option<f64>,
+    /// Least share of the run a follower saw its parent.
+    min_parent_visible: Option<f64>,
+}
+
+impl Figures {
+    /// Reads the figures from a run's summary (with the `rss_sum_kib` key
+    /// this benchmark adds). `orchestrator_cpu_before` is this process's CPU
+    /// time when the run started: the summary has the orchestrator's
+    /// cumulative CPU, which here spans earlier runs.
+    fn from_summary(s: &Value, orchestrator_cpu_before: f64) -> anyhow::Result<Self> {
+        let num = |p: &str| {
+            s.pointer(p)
+                .and_then(Value::as_f64)
+                .with_context(|| format!("summary.json has no number at {p}"))
+        };
+        let count = |p: &str| {
+            s.pointer(p)
+                .and_then(Value::as_u64)
+                .with_context(|| format!("summary.json has no count at {p}"))
+        };
+        let mut cpu_s: BTreeMap<String, f64> = s
+            .get("cpu_time_s")
+            .and_then(Value::as_object)
+            .context("summary.json has no cpu_time_s")?
+            .iter()
+            .filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x)))
+            .collect();
+        if let Some(o) = cpu_s.get_mut("orchestrator") {
+            *o = (*o - orchestrator_cpu_before).max(0.0);
+        }
+        let rss_kib = s
+            .get("rss_sum_kib")
+            .and_then(Value::as_object)
+            .context("summary.json has no rss_sum_kib")?
+            .iter()
+            .filter_map(|(k, v)| v.as_i64().map(|x| (k.clone(), x)))
+            .collect();
+        let min_parent_visible = s
+            .pointer("/perception/leader_visible_fraction")
+            .and_then(Value::as_object)
+            .and_then(|m| {
+                m.values()
+                    .filter_map(Value::as_f64)
+                    .min_by(|a, b| a.total_cmp(b))
+            });
+        Ok(Self {
+            sim_s: num("/sim_time_s")?,
+            wall_s: num("/wall_time_s")?,
+            cpu_s,
+            rss_kib,
+            recorder_messages: count("/recording/messages")?,
+            recorder_dropped: count("/recording/dropped")?,
+            collisions: count("/safety/collisions")?,
+            min_pair_m: s
+                .pointer("/safety/min_pair_distance_m")
+                .and_then(Value::as_f64),
+            safe_distance_m: s.pointer("/safety/safe_distance_m").and_then(Value::as_f64),
+            min_parent_visible,
+        })
+    }
+
+    /// Simulated s per wall s.
+    fn rtf(&self) -> f64 {
+        ratio(self.sim_s, self.wall_s)
+    }
+
+    /// CPU time of every process, s.
+    fn cpu_total_s(&self) -> f64 {
+        self.cpu_s.values().sum()
+    }
+
+    /// CPU time per vehicle and simulated second, ms.
+    fn cpu_ms_per_vehicle_s(&self, vehicles: usize) -> f64 {
+        1e3 * ratio(self.cpu_total_s(), vehicles as f64 * self.sim_s)
+    }
+
+    /// Sum of every process's peak RSS, MiB.
+    fn rss_total_mib(&self) -> f64 {
+        self.rss_kib.values().sum::<i64>() as f64 / 1024.0
+    }
+
+    /// Recorded messages per wall second.
+    fn recorder_msgs_per_s(&self) -> f64 {
+        ratio(self.recorder_messages as f64, self.wall_s)
+    }
+
+    fn to_json(&self, vehicles: usize) -> Value {
+        json!({
+            "sim_s": self.sim_s,
+            "wall_s": self.wall_s,
+            "real_time_factor": finite(self.rtf()),
+            "cpu_s": self.cpu_s,
+            "cpu_total_s": self.cpu_total_s(),
+            "cpu_ms_per_vehicle_s": finite(self.cpu_ms_per_vehicle_s(vehicles)),
+            "rss_sum_kib": self.rss_kib,
+            "rss_total_mib": self.rss_total_mib(),
+            "recorder_messages": self.recorder_messages,
+            "recorder_dropped": self.recorder_dropped,
+            "recorder_msgs_per_s": finite(self.recorder_msgs_per_s()),
+            "collisions": self.collisions,
+            "min_pair_distance_m": self.min_pair_m,
+            "safe_distance_m": self.safe_distance_m,
+            "min_parent_visible_fraction": self.min_parent_visible,
+        })
+    }
+}
+
+/// `a / b`, NaN when `b` is not positive.
+fn ratio(a: f64, b: f64) -> f64 {
+    if b > 0.0 {
+        a / b
+    } else {
+        f64::NAN
+    }
+}
+
+fn finite(x: f64) -> Value {
+    if x.is_finite() {
+        json!(x)
+    } else {
+        Value::Null
+    }
+}
+
+/// What became of one group size.
+#[derive(Debug, Clone, PartialEq)]
+enum Status {
+    /// Ran to the end.
+    Ran(Box<Figures>),
+    /// Not started: the machine cannot hold it (the reason).
+    Skipped(String),
+    /// Started (or generated) and failed (the error).
+    Failed(String),
+}
+
+/// One row of the table.
+#[derive(Debug, Clone, PartialEq)]
+struct Row {
+    /// Vehicles, leader included.
+    vehicles: usize,
+    /// Service processes (the orchestrator not counted); `None` if the
+    /// scenario could not be generated.
+    processes: Option<usize>,
+    /// The run's directory.
+    dir: PathBuf,
+    status: Status,
+}
+
+impl Row {
+    fn figures(&self) -> Option<&Figures> {
+        match &self.status {
+            Status::Ran(f) => Some(f),
+            _ => None,
+        }
+    }
+
+    /// CPU ms per vehicle-second, if the run finished.
+    fn cost(&self) -> Option<f64> {
+        self.figures()
+            .map(|f| f.cpu_ms_per_vehicle_s(self.vehicles))
+            .filter(|c| c.is_finite())
+    }
+
+    fn to_json(&self) -> Value {
+        let (status, reason, figures) = match &self.status {
+            Status::Ran(f) => ("ran", Value::Null, f.to_json(self.vehicles)),
+            Status::Skipped(r) => ("skipped", json!(r), Value::Null),
+            Status::Failed(r) => ("failed", json!(r), Value::Null),
+        };
+        json!({
+            "vehicles": self.vehicles,
+            "processes": self.processes,
+            "dir": self.dir.display().to_string(),
+            "status": status,
+            "reason": reason,
+            "figures": figures,
+        })
+    }
+}
+
+/// The cost ratio of issue 8: `(largest N that ran, its cost / the cost at
+/// N = 25)`, when both ran and the largest is not 25 itself.
+fn cost_ratio(rows: &[Row]) -> Option<(usize, f64)> {
+    let reference = rows
+        .iter()
+        .find(|r| r.vehicles == REFERENCE_N)
+        .and_then(Row::cost)?;
+    let (n, cost) = rows
+        .iter()
+        .filter_map(|r| r.cost().map(|c| (r.vehicles, c)))
+        .max_by_key(|(n, _)| *n)?;
+    (n != REFERENCE_N && reference > 0.0).then(|| (n, cost / reference))
+}
+
+/// A figure as printed: three significant digits, `-` for NaN.
+fn fmt_num(x: f64) -> String {
+    if !x.is_finite() {
+        "-".to_string()
+    } else if x.abs() >= 100.0 {
+        format!("{x:.0}")
+    } else if x.abs() >= 10.0 {
+        format!("{x:.1}")
+    } else if x.abs() >= 1.0 {
+        format!("{x:.2}")
+    } else {
+        format!("{x:.3}")
+    }
+}
+
+/// First line of an error, for a table cell.
+fn one_line(s: &str) -> String {
+    let line = s.lines().next().unwrap_or("").replace('|', "/");
+    if line.chars().count() > 160 {
+        let mut cut: String = line.chars().take(157).collect();
+        cut.push_str("...");
+        cut
+    } else {
+        line
+    }
+}
+
+/// Column headings of the table.
+const HEADINGS: [&str; 11] = [
+    "N",
+    "processes",
+    "real-time factor",
+    "CPU ms / vehicle-s",
+    "peak RSS sum MiB",
+    "recorder msg/s",
+    "drops",
+    "collisions",
+    "min pair m",
+    "min parent visible",
+    "note",
+];
+
+/// The cells of a row, in [`HEADINGS`] order.
+fn cells(r: &Row) -> Vec<String> {
+    let procs = r.processes.map_or("-".to_string(), |p| p.to_string());
+    match &r.status {
+        Status::Ran(f) => {
+            let note = match (f.min_pair_m, f.safe_distance_m) {
+                _ if f.collisions > 0 || f.recorder_dropped > 0 => "UNHEALTHY".to_string(),
+                (Some(m), Some(safe)) if m < safe => "below safe distance".to_string(),
+                _ => String::new(),
+            };
+            vec![
+                r.vehicles.to_string(),
+                procs,
+                format!("{}x", fmt_num(f.rtf())),
+                fmt_num(f.cpu_ms_per_vehicle_s(r.vehicles)),
+                fmt_num(f.rss_total_mib()),
+                fmt_num(f.recorder_msgs_per_s()),
+                f.recorder_dropped.to_string(),
+                f.collisions.to_string(),
+                f.min_pair_m.map_or("-".to_string(), fmt_num),
+                f.min_parent_visible
+                    .map_or("-".to_string(), |v| format!("{:.0}%", 100.0 * v)),
+                note,
+            ]
+        }
+        Status::Skipped(why) | Status::Failed(why) => {
+            let what = if matches!(r.status, Status::Skipped(_)) {
+                "skipped"
+            } else {
+                "FAILED"
+            };
+            let mut c = vec![r.vehicles.to_string(), procs];
+            c.extend(std::iter::repeat_n("-".to_string(), HEADINGS.len() - 3));
+            c.push(format!("{what}: {}", one_line(why)));
+            c
+        }
+    }
+}
+
+/// The table as Markdown (also what is printed), and the cost-ratio line.
+fn render_table(rows: &[Row]) -> String {
+    let all: Vec<Vec<String>> = rows.iter().map(cells).collect();
+    // The note column is not padded (it may be long).
+    let last = HEADINGS.len() - 1;
+    let width = |i: usize| {
+        all.iter()
+            .map(|c| c[i].chars().count())
+            .chain(std::iter::once(HEADINGS[i].chars().count()))
+            .max()
+            .unwrap_or(1)
+    };
+    let widths: Vec<usize> = (0..HEADINGS.len())
+        .map(|i| if i == last { 0 } else { width(i) })
+        .collect();
+    let line = |cells: &[String]| {
+        let mut s = String::from("|");
+        for (i, c) in cells.iter().enumerate() {
+            if i == 0 || i == last {
+                let _ = write!(s, " {c:<w$} |", w = widths[i]);
+            } else {
+                let _ = write!(s, " {c:>w$} |", w = widths[i]);
+            }
+        }
+        s.push('\n');
+        s
+    };
+    let mut out = line(&HEADINGS.map(String::from));
+    out.push('|');
+    for (i, w) in widths.iter().enumerate() {
+        let dashes = "-".repeat((*w).max(3));
+        if i == 0 || i == last {
+            let _ = write!(out, " {dashes} |");
+        } else {
+            let _ = write!(out, " {}: |", &dashes[1..]);
+        }
+    }
+    out.push('\n');
+    for c in &all {
+        out.push_str(&line(c));
+    }
+    out.push('\n');
+    out.push_str(&ratio_line(rows));
+    out.push('\n');
+    out
+}
+
+/// The cost ratio against issue 8's bound, in words.
+fn ratio_line(rows: &[Row]) -> String {
+    match cost_ratio(rows) {
+        Some((n, r)) => format!(
+            "cost ratio (CPU per vehicle-second, N = {n} / N = {REFERENCE_N}): {r:.2} \
+             (issue 8: <= {COST_RATIO_BOUND}) [{}]",
+            if r <= COST_RATIO_BOUND {
+                "met"
+            } else {
+                "MISSED"
+            }
+        ),
+        None => {
+            format!("cost ratio: needs N = {REFERENCE_N} and a larger N that both ran to the end")
+        }
+    }
+}
+
+fn load_average() -> Option<f64> {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
+}
+
+/// Resets this process's peak RSS (`VmHWM`) to its current RSS, so the
+/// next reading is the peak of the coming run; false if the kernel refused.
+fn reset_own_peak_rss() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
+/// This process's peak RSS (`VmHWM`), KiB.
+fn own_peak_rss_kib() -> Option<i64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
+}
+
+/// Generates the scenario of `n` vehicles, cut to `duration_s`, resolved.
+fn scenario_for(cmd: &ScaleCmd, n: usize) -> anyhow::Result<Scenario> {
+    let opts = GenOptions {
+        vehicles: n,
+        shape: cmd.shape,
+        seed: cmd.seed,
+        ..GenOptions::default()
+    };
+    let text = gen::generate(&opts).with_context(|| format!("generating N = {n}"))?;
+    let mut s = Scenario::from_toml(&text)
+        .with_context(|| format!("the generated scenario of N = {n} does not parse"))?;
+    s.duration_s = cmd.duration_s;
+    check::resolve(&mut s).with_context(|| format!("the generated scenario of N = {n}"))?;
+    Ok(s)
+}
+
+/// Runs one resolved scenario into `dir`: summary.json (with `rss_sum_kib`,
+/// the orchestrator's peak included) and, if asked, the figures.
+fn run_one(
+    scenario: &Scenario,
+    dir: &Path,
+    settings: &RunSettings,
+    plots: bool,
+) -> anyhow::Result<Figures> {
+    let opts = run::RunOptions {
+        scenario: scenario.clone(),
+        out: dir.to_path_buf(),
+        mode: settings.mode,
+        bin_dir: settings.bin_dir.clone(),
+        progress: settings.progress,
+        tick_timeout: settings.tick_timeout,
+        spin_us: settings.spin_us,
+    };
+    let peak_reset = reset_own_peak_rss();
+    let cpu_before = sys::self_cpu_s();
+    let outcome = run::run(&opts)?;
+    let mut rss = outcome.rss_sum_kib.clone();
+    if let Some(own) = own_peak_rss_kib() {
+        rss.insert("orchestrator".into(), own);
+    }
+    let rec = recordings::Recording::open(&outcome.recording)?;
+    let mut s = summary::summarize(scenario, &rec, &outcome, settings.mode.as_str());
+    if let Some(obj) = s.as_object_mut() {
+        obj.insert("rss_sum_kib".into(), json!(rss));
+        obj.insert("orchestrator_peak_rss_reset".into(), json!(peak_reset));
+    }
+    let path = dir.join("summary.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&s)?)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    if plots {
+        plots::write_plots(scenario, &rec, &dir.join("plots")).context("writing the plots")?;
+    }
+    Figures::from_summary(&s, cpu_before)
+}
+
+/// True if the error is SIGINT/SIGTERM: the benchmark stops there.
+fn interrupted(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        matches!(
+            c.downcast_ref::<run::RunError>(),
+            Some(run::RunError::Interrupted(_))
+        )
+    })
+}
+
+/// Runs the benchmark: a progress line per N on stderr, the table on
+/// stdout, the files into OUT.
+pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
+    let mut sizes = cmd.vehicles.clone();
+    sizes.sort_unstable();
+    sizes.dedup();
+    let out = cmd.out.clone().unwrap_or_else(|| {
+        let secs = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_secs())
+            .unwrap_or(0);
+        Path::new("runs").join(format!("bench-scale-{secs}"))
+    });
+    let dir_of = |n: usize| out.join(format!("n{n:03}"));
+    for &n in &sizes {
+        if dir_of(n).join("recording.mcap").exists() {
+            anyhow::bail!(
+                "{} already holds a recording; choose another --out (nothing was overwritten)",
+                dir_of(n).display()
+            );
+        }
+    }
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    let settings = RunSettings::new(Mode::Lockstep, cmd.bin_dir.clone(), false, cmd.tick_timeout)?;
+    let started = Instant::now();
+    let load_before = load_average();
+    let mut rows: Vec<Row> = Vec::with_capacity(sizes.len());
+    let mut stopped: Option<anyhow::Error> = None;
+    for (i, &n) in sizes.iter().enumerate() {
+        let tag = format!("[{}/{}] N = {n}", i + 1, sizes.len());
+        let dir = dir_of(n);
+        let scenario = match scenario_for(&cmd, n) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("{tag}: FAILED: {e:#}");
+                rows.push(Row {
+                    vehicles: n,
+                    processes: None,
+                    dir,
+                    status: Status::Failed(format!("{e:#}")),
+                });
+                continue;
+            }
+        };
+        let processes = scenario.processes().len();
+        let needs = check::needs(&scenario);
+        if let Err(e) = check::fits(&needs) {
+            eprintln!("{tag}: skipped, the machine cannot hold it: {e:#}");
+            rows.push(Row {
+                vehicles: n,
+                processes: Some(processes),
+                dir,
+                status: Status::Skipped(format!("{e:#}")),
+            });
+            continue;
+        }
+        eprintln!(
+            "{tag}: {processes} processes, {} s simulated, into {} ...",
+            fmt_num(cmd.duration_s),
+            dir.display()
+        );
+        let t0 = Instant::now();
+        let status = match run_one(&scenario, &dir, &settings, cmd.plots) {
+            Ok(f) => {
+                eprintln!(
+                    "{tag}: {}x real time, {} ms CPU per vehicle-s, {} MiB peak RSS sum, \
+                     {} recorder msg/s, {} dropped, {} collisions ({:.0} s)",
+                    fmt_num(f.rtf()),
+                    fmt_num(f.cpu_ms_per_vehicle_s(n)),
+                    fmt_num(f.rss_total_mib()),
+                    fmt_num(f.recorder_msgs_per_s()),
+                    f.recorder_dropped,
+                    f.collisions,
+                    t0.elapsed().as_secs_f64()
+                );
+                Status::Ran(Box::new(f))
+            }
+            Err(e) if interrupted(&e) => {
+                eprintln!("{tag}: interrupted");
+                rows.push(Row {
+                    vehicles: n,
+                    processes: Some(processes),
+                    dir,
+                    status: Status::Failed(format!("{e:#}")),
+                });
+                stopped = Some(e);
+                break;
+            }
+            Err(e) => {
+                eprintln!("{tag}: FAILED: {e:#}");
+                Status::Failed(format!("{e:#}"))
+            }
+        };
+        rows.push(Row {
+            vehicles: n,
+            processes: Some(processes),
+            dir,
+            status,
+        });
+    }
+    let load_after = load_average();
+    let elapsed = started.elapsed().as_secs_f64();
+
+    let load = |l: Option<f64>| l.map_or("?".to_string(), |x| format!("{x:.2}"));
+    let cpus = std::thread::available_parallelism().map_or(0, |n| n.get());
+    let head = format!(
+        "shoal bench scale: shape {}, seed {}, {} s simulated per run, lockstep; {cpus} CPUs, \
+         load average {} -> {}; {:.0} s in all",
+        cmd.shape.name(),
+        cmd.seed,
+        fmt_num(cmd.duration_s),
+        load(load_before),
+        load(load_after),
+        elapsed
+    );
+    let table = render_table(&rows);
+    println!("{head}\n\n{table}");
+    let md = format!(
+        "# shoal bench scale\n\n{head}\n\n{table}\nCPU: every process of the run, the \
+         orchestrator included, per vehicle and simulated second. Peak RSS sum: every \
+         process's peak resident set added up (shared pages count once per process).\n"
+    );
+    let md_path = out.join("scale.md");
+    std::fs::write(&md_path, md).with_context(|| format!("cannot write {}", md_path.display()))?;
+    let doc = json!({
+        "shape": cmd.shape.name(),
+        "seed": cmd.seed,
+        "duration_s": cmd.duration_s,
+        "mode": "lockstep",
+        "cpus": cpus,
+        "load_average": [load_before, load_after],
+        "elapsed_s": elapsed,
+        "rows": rows.iter().map(Row::to_json).collect::<Vec<_>>(),
+        "cost_ratio": cost_ratio(&rows).map(|(n, r)| json!({
+            "vehicles": n, "reference_vehicles": REFERENCE_N, "ratio": r,
+            "bound": COST_RATIO_BOUND, "met": r <= COST_RATIO_BOUND,
+        })),
+    });
+    let json_path = out.join("scale.json");
+    std::fs::write(&json_path, serde_json::to_string_pretty(&doc)?)
+        .with_context(|| format!("cannot write {}", json_path.display()))?;
+    let title = format!(
+        "shoal bench scale: cost and speed against group size ({} formation, {} s simulated, lockstep)",
+        cmd.shape.name(),
+        fmt_num(cmd.duration_s)
+    );
+    match write_plot(&rows, &title, &out) {
+        Ok(files) if files.is_empty() => eprintln!("no run finished: no plot"),
+        Ok(_) => {}
+        Err(e) => eprintln!("the plot could not be drawn: {e:#}"),
+    }
+    println!("{}", out.display());
+    if let Some(e) = stopped {
+        return Err(e);
+    }
+    let failed: Vec<usize> = rows
+        .iter()
+        .filter(|r| matches!(r.status, Status::Failed(_)))
+        .map(|r| r.vehicles)
+        .collect();
+    if !failed.is_empty() {
+        anyhow::bail!("the runs of N = {failed:?} failed (see the table and their logs)");
+    }
+    Ok(())
+}
+
+/// Points `(N, value)` of the rows that ran.
+fn series(rows: &[Row], value: impl Fn(&Row, &Figures) -> f64) -> Vec<(f64, f64)> {
+    rows.iter()
+        .filter_map(|r| {
+            let f = r.figures()?;
+            let v = value(r, f);
+            v.is_finite().then_some((r.vehicles as f64, v))
+        })
+        .collect()
+}
+
+/// Writes `scale.png` and `scale.svg` into `dir`; nothing when no run
+/// finished.
+fn write_plot(rows: &[Row], title: &str, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    if rows.iter().all(|r| r.figures().is_none()) {
+        return Ok(Vec::new());
+    }
+    plots::register_font()?;
+    let size = (plots::WIDTH, 1300);
+    let png = dir.join("scale.png");
+    {
+        let root = BitMapBackend::new(&png, size).into_drawing_area();
+        draw_scale(rows, title, &root).with_context(|| format!("drawing {}", png.display()))?;
+        root.present()
+            .with_context(|| format!("writing {}", png.display()))?;
+    }
+    let svg = dir.join("scale.svg");
+    {
+        let root = SVGBackend::new(&svg, size).into_drawing_area();
+        draw_scale(rows, title, &root).with_context(|| format!("drawing {}", svg.display()))?;
+        root.present()
+            .with_context(|| format!("writing {}", svg.display()))?;
+    }
+    Ok(vec![png, svg])
+}
+
+/// Two panels against N: (a) CPU per vehicle-second with issue 8's bound
+/// (1.5 × the cost at N = 25), (b) real-time factor with the 1× line.
+fn draw_scale<DB: DrawingBackend>(
+    rows: &[Row],
+    title: &str,
+    root: &DrawingArea<DB, Shift>,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE)?;
+    let body = plots::titled(root, title, plots::TITLE_H as u32, plots::caption_style())?;
+    let panels = body.split_evenly((2, 1));
+    let max_n = rows.iter().map(|r| r.vehicles).max().unwrap_or(1) as f64;
+    let x = 0.0..(max_n * 1.08).max(2.0);
+    let blue = RGBColor(31, 119, 180);
+    let red = RGBColor(214, 39, 40);
+    let reference = rows
+        .iter()
+        .find(|r| r.vehicles == REFERENCE_N)
+        .and_then(Row::cost);
+    let cost = series(rows, |r, f| f.cpu_ms_per_vehicle_s(r.vehicles));
+    let rtf = series(rows, |_, f| f.rtf());
+    type Panel<'p> = (&'p [(f64, f64)], &'p str, &'p str, Option<(f64, String)>);
+    let panel_specs: [Panel; 2] = [
+        (
+            &cost,
+            "total CPU time per vehicle-second (ms)",
+            "(a) cost per vehicle-second (every process, orchestrator included)",
+            reference.map(|c| {
+                (
+                    COST_RATIO_BOUND * c,
+                    format!("{COST_RATIO_BOUND} x cost at N = {REFERENCE_N} (issue 8 bound)"),
+                )
+            }),
+        ),
+        (
+            &rtf,
+            "real-time factor (simulated s / wall s)",
+            "(b) real-time factor",
+            Some((1.0, "real time (issue 8 goal at N = 100)".to_string())),
+        ),
+    ];
+    for (i, (pts, y_desc, sub, line)) in panel_specs.iter().enumerate() {
+        let area = plots::titled(&panels[i], sub, 34, plots::subtitle_style())?;
+        let top = pts
+            .iter()
+            .map(|p| p.1)
+            .chain(line.as_ref().map(|l| l.0))
+            .fold(0.0, f64::max);
+        let y = 0.0..(top * 1.2).max(1e-3);
+        let (plot, legend_area) = plots::split_legend(&area);
+        let mut leg = plots::Legend::new();
+        let mut c = plots::chart(&plot).build_cartesian_2d(x.clone(), y.clone())?;
+        plots::mesh(&mut c, "vehicles N", y_desc, false)?;
+        if let Some((v, label)) = line {
+            plots::hline(
+                &mut c,
+                &mut leg,
+                &x,
+                *v,
+                red,
+                3,
+                (14, 8),
+                Some(label.clone()),
+            )?;
+        }
+        let name = if i == 0 {
+            "measured cost"
+        } else {
+            "measured real-time factor"
+        };
+        plots::curve(&mut c, &mut leg, pts.iter().copied(), blue, 3, None)?;
+        c.draw_series(pts.iter().map(|&p| {
+            EmptyElement::at(p)
+                + Circle::new((0, 0), 8, blue.filled())
+                + Text::new(
+                    plots::num((p.1 * 100.0).round() / 100.0),
+                    (10, -12),
+                    plots::legend_style().pos(Pos::new(HPos::Left, VPos::Bottom)),
+                )
+        }))?;
+        leg.insert(0, (name.to_string(), plots::Key::Dot(blue)));
+        plots::draw_legend(&legend_area, &leg)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        cmd: ScaleCmd,
+    }
+
+    fn parse(args: &[&str]) -> Result<ScaleCmd, clap::Error> {
+        Cli::try_parse_from(std::iter::once("scale").chain(args.iter().copied())).map(|c| c.cmd)
+    }
+
+    fn figures(sim_s: f64, wall_s: f64, cpu: &[(&str, f64)], rss: &[(&str, i64)]) -> Figures {
+        Figures {
+            sim_s,
+            wall_s,
+            cpu_s: cpu.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            rss_kib: rss.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            recorder_messages: 1000,
+            recorder_dropped: 0,
+            collisions: 0,
+            min_pair_m: Some(3.5),
+            safe_distance_m: Some(2.0),
+            min_parent_visible: Some(0.97),
+        }
+    }
+
+    fn ran(n: usize, cpu_total: f64) -> Row {
+        Row {
+            vehicles: n,
+            processes: Some(5 * n + 1),
+            dir: PathBuf::from(format!("out/n{n:03}")),
+            status: Status::Ran(Box::new(figures(
+                20.0,
+                10.0,
+                &[("mpc", cpu_total)],
+                &[("mpc", 1024)],
+            ))),
+        }
+    }
+
+    #[test]
+    fn arguments_default_to_the_issue_sizes_and_refuse_bad_ones() {
+        let c = parse(&[]).unwrap();
+        assert_eq!(c.vehicles, vec![5, 25, 50, 100]);
+        assert_eq!(c.shape, Shape::Triangle);
+        assert_eq!(c.duration_s, 30.0);
+        assert!(c.out.is_none() && !c.plots);
+        let c = parse(&["--vehicles", "25,5", "--duration-s", "20", "--shape", "v"]).unwrap();
+        assert_eq!(c.vehicles, vec![25, 5]);
+        assert_eq!(c.duration_s, 20.0);
+        assert_eq!(c.shape, Shape::V);
+        assert!(parse(&["--vehicles", "1"]).is_err());
+        assert!(parse(&["--vehicles", &(gen::MAX_VEHICLES + 1).to_string()]).is_err());
+        assert!(parse(&["--vehicles", "5,x"]).is_err());
+        assert!(parse(&["--duration-s", "0"]).is_err());
+        assert!(parse(&["--duration-s", "-3"]).is_err());
+        assert!(parse(&["--duration-s", "nan"]).is_err());
+    }
+
+    #[test]
+    fn figures_are_read_from_the_summary_with_this_runs_orchestrator_cpu() {
+        let s = json!({
+            "sim_time_s": 20.0, "wall_time_s": 8.0,
+            "cpu_time_s": { "mpc": 6.0, "orchestrator": 12.0, "world": 1.0 },
+            "rss_sum_kib": { "mpc": 20480, "orchestrator": 10240 },
+            "recording": { "messages": 4000, "dropped": 2 },
+            "safety": { "collisions": 0, "min_pair_distance_m": 2.5, "safe_distance_m": 2.0 },
+            "perception": { "leader_visible_fraction": { "F1": 0.9, "F2": 0.75 } },
+        });
+        let f = Figures::from_summary(&s, 11.0).unwrap();
+        assert_eq!(f.cpu_s["orchestrator"], 1.0);
+        assert_eq!(f.cpu_total_s(), 8.0);
+        assert_eq!(f.rtf(), 2.5);
+        // 8 s of CPU over 5 vehicles × 20 s = 80 ms per vehicle-second.
+        approx::assert_relative_eq!(f.cpu_ms_per_vehicle_s(5), 80.0, epsilon = 1e-12);
+        assert_eq!(f.rss_total_mib(), 30.0);
+        assert_eq!(f.recorder_msgs_per_s(), 500.0);
+        assert_eq!(f.recorder_dropped, 2);
+        assert_eq!(f.min_parent_visible, Some(0.75));
+        assert_eq!(f.min_pair_m, Some(2.5));
+        assert!(Figures::from_summary(&json!({ "sim_time_s": 1.0 }), 0.0).is_err());
+    }
+
+    #[test]
+    fn the_cost_ratio_is_the_largest_n_that_ran_against_n25() {
+        // Cost per vehicle-s: total / (N × 20 s).
+        let rows = vec![
+            ran(5, 1.0),
+            ran(25, 5.0),
+            ran(50, 12.0),
+            Row {
+                vehicles: 100,
+                processes: Some(501),
+                dir: PathBuf::from("out/n100"),
+                status: Status::Skipped("vehicles: too many processes".into()),
+            },
+        ];
+        let (n, r) = cost_ratio(&rows).unwrap();
+        assert_eq!(n, 50);
+        approx::assert_relative_eq!(r, (12.0 / 50.0) / (5.0 / 25.0), epsilon = 1e-12);
+        // Without N = 25, or with nothing larger, there is no ratio.
+        assert_eq!(cost_ratio(&[ran(5, 1.0), ran(50, 10.0)]), None);
+        assert_eq!(cost_ratio(&[ran(5, 1.0), ran(25, 5.0)]), None);
+    }
+
+    #[test]
+    fn the_table_has_a_row_per_size_and_says_why_one_was_skipped() {
+        let mut unhealthy = ran(50, 20.0);
+        if let Status::Ran(f) = &mut unhealthy.status {
+            f.collisions = 1;
+        }
+        let rows = vec![
+            ran(5, 1.0),
+            ran(25, 5.0),
+            unhealthy,
+            Row {
+                vehicles: 100,
+                processes: Some(501),
+                dir: PathBuf::from("out/n100"),
+                status: Status::Skipped(
+                    "vehicles: the run needs 502 processes, but only 300 more can start here"
+                        .into(),
+                ),
+            },
+        ];
+        let t = render_table(&rows);
+        let row = |n: &str| {
+            t.lines()
+                .find(|l| l.starts_with(&format!("| {n} ")))
+                .unwrap_or_else(|| panic!("no row {n} in\n{t}"))
+                .to_string()
+        };
+        let cols = |l: &str| -> Vec<String> {
+            l.trim_matches('|')
+                .split('|')
+                .map(|c| c.trim().to_string())
+                .collect()
+        };
+        let header = cols(t.lines().next().unwrap());
+        assert_eq!(header.len(), HEADINGS.len());
+        // N = 25: 5 s CPU over 25 × 20 vehicle-s = 10 ms; 2x real time;
+        // 1 MiB; 1000 messages over 10 s.
+        let r25 = cols(&row("25"));
+        assert_eq!(r25.len(), HEADINGS.len());
+        assert_eq!(r25[1], "126");
+        assert_eq!(r25[2], "2.00x");
+        assert_eq!(r25[3], "10.0");
+        assert_eq!(r25[4], "1.00");
+        assert_eq!(r25[5], "100");
+        assert_eq!(r25[9], "97%");
+        assert_eq!(r25[10], "");
+        assert!(row("50").contains("UNHEALTHY"), "{t}");
+        let r100 = cols(&row("100"));
+        assert_eq!(r100.len(), HEADINGS.len(), "{t}");
+        assert_eq!(r100[1], "501");
+        assert!(
+            r100[10].starts_with("skipped: vehicles: the run needs 502"),
+            "{t}"
+        );
+        // The ratio line: N = 50 (largest that ran) against N = 25.
+        let expected = format!("{:.2}", (20.0 / 50.0) / (5.0 / 25.0));
+        assert!(
+            t.lines()
+                .any(|l| l.contains("N = 50 / N = 25") && l.contains(&expected)),
+            "{t}"
+        );
+    }
+
+    #[test]
+    fn the_plot_is_written_when_a_run_finished() {
+        let tmp = tempfile::tempdir().unwrap();
+        let rows = vec![ran(5, 1.0), ran(25, 5.0)];
+        let files = write_plot(&rows, "test", tmp.path()).unwrap();
+        assert_eq!(files.len(), 2);
+        let png = std::fs::read(tmp.path().join("scale.png")).unwrap();
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+        let svg = std::fs::read_to_string(tmp.path().join("scale.svg")).unwrap();
+        assert!(svg.contains("vehicles N") && svg.contains("issue 8 bound"));
+        let skipped = vec![Row {
+            vehicles: 5,
+            processes: None,
+            dir: PathBuf::from("x"),
+            status: Status::Failed("no".into()),
+        }];
+        assert!(write_plot(&skipped, "test", tmp.path()).unwrap().is_empty());
+    }
+}
