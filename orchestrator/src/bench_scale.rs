@@ -17,9 +17,14 @@
 //!   the run, the orchestrator's share included (start-up and shutdown
 //!   too), divided by N × simulated s, in ms;
 //! * **peak memory**: the sum over every process (orchestrator included) of
-//!   its peak resident set, MiB. Shared pages (libraries, iceoryx2 segments)
-//!   count once per process that touched them, so this is an upper bound of
-//!   what the run occupies;
+//!   its peak resident set (`VmHWM`), MiB. Shared pages (libraries, iceoryx2
+//!   segments) count once per process that touched them, so this is an
+//!   upper bound of what the run occupies; next to it the sum of the peak
+//!   private (anonymous) memory, which is counted once. A thread reads
+//!   `/proc/PID/status` of every child every 0.2 s while the run goes (the
+//!   `ru_maxrss` of `wait4` would also count the orchestrator's pages that a
+//!   child holds between fork and exec); its CPU is left out of the
+//!   orchestrator's;
 //! * **recorder messages/s and drops**: messages in the recording (its
 //!   `shoal.recorder` metadata) per wall second, and the messages it lost;
 //! * **collisions, min pair distance, min parent visible**: from the
@@ -31,10 +36,12 @@
 //! `OUT/scale.svg` (cost and real-time factor against N). Nothing fails on
 //! a figure.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use plotters::coord::Shift;
@@ -60,7 +67,8 @@ const REFERENCE_N: usize = 25;
                   as `shoal gen --vehicles N --shape SHAPE --seed SEED` does, run it in lockstep \
                   for --duration-s simulated seconds and report: processes, real-time factor, \
                   total CPU time per vehicle-second (every process, the orchestrator included), \
-                  peak memory (sum of every process's peak RSS), recorder messages/s and drops, \
+                  peak memory (sum of every process's peak RSS, and of its private memory, \
+                  sampled from /proc every 0.2 s), recorder messages/s and drops, \
                   collisions, minimum pair distance and the least time a follower saw its parent. \
                   A size the machine cannot hold (processes, /dev/shm, open files; see `shoal \
                   check`) is skipped with the reason. Writes OUT/scale.md, OUT/scale.json and \
@@ -128,8 +136,11 @@ struct Figures {
     wall_s: f64,
     /// CPU time per process kind, the orchestrator's of this run only, s.
     cpu_s: BTreeMap<String, f64>,
-    /// Peak RSS summed over the processes of each kind, KiB.
+    /// Peak RSS (`VmHWM`) summed over the processes of each kind, KiB.
     rss_kib: BTreeMap<String, i64>,
+    /// Peak private memory (`RssAnon`) summed over the processes of each
+    /// kind, KiB.
+    private_kib: BTreeMap<String, i64>,
     /// Messages in the recording.
     recorder_messages: u64,
     /// Messages the recorder lost.
@@ -145,10 +156,11 @@ struct Figures {
 }
 
 impl Figures {
-    /// Reads the figures from a run's summary (with the `rss_sum_kib` key
-    /// this benchmark adds). `orchestrator_cpu_before` is this process's CPU
-    /// time when the run started: the summary has the orchestrator's
-    /// cumulative CPU, which here spans earlier runs.
+    /// Reads the figures from a run's summary (with the `memory_sampled`
+    /// section this benchmark adds). `orchestrator_cpu_before` is this
+    /// process's CPU time when the run started: the summary has the
+    /// orchestrator's cumulative CPU, which here spans earlier runs; the
+    /// memory sampler's own CPU is taken out of it too.
     fn from_summary(s: &Value, orchestrator_cpu_before: f64) -> anyhow::Result<Self> {
         let num = |p: &str| {
             s.pointer(p)
@@ -167,16 +179,21 @@ impl Figures {
             .iter()
             .filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x)))
             .collect();
+        let sampler_cpu_s = s
+            .pointer("/memory_sampled/sampler_cpu_s")
+            .and_then(Value::as_f64)
+            .unwrap_or(0.0);
         if let Some(o) = cpu_s.get_mut("orchestrator") {
-            *o = (*o - orchestrator_cpu_before).max(0.0);
+            *o = (*o - orchestrator_cpu_before - sampler_cpu_s).max(0.0);
         }
-        let rss_kib = s
-            .get("rss_sum_kib")
-            .and_then(Value::as_object)
-            .context("summary.json has no rss_sum_kib")?
-            .iter()
-            .filter_map(|(k, v)| v.as_i64().map(|x| (k.clone(), x)))
-            .collect();
+        let per_kind = |key: &str| -> anyhow::Result<BTreeMap<String, i64>> {
+            Ok(s.pointer(&format!("/memory_sampled/{key}"))
+                .and_then(Value::as_object)
+                .with_context(|| format!("summary.json has no memory_sampled.{key}"))?
+                .iter()
+                .filter_map(|(k, v)| v.as_i64().map(|x| (k.clone(), x)))
+                .collect())
+        };
         let min_parent_visible = s
             .pointer("/perception/leader_visible_fraction")
             .and_then(Value::as_object)
@@ -189,7 +206,8 @@ impl Figures {
             sim_s: num("/sim_time_s")?,
             wall_s: num("/wall_time_s")?,
             cpu_s,
-            rss_kib,
+            rss_kib: per_kind("peak_rss_kib")?,
+            private_kib: per_kind("peak_private_kib")?,
             recorder_messages: count("/recording/messages")?,
             recorder_dropped: count("/recording/dropped")?,
             collisions: count("/safety/collisions")?,
@@ -221,6 +239,11 @@ impl Figures {
         self.rss_kib.values().sum::<i64>() as f64 / 1024.0
     }
 
+    /// Sum of every process's peak private (anonymous) memory, MiB.
+    fn private_total_mib(&self) -> f64 {
+        self.private_kib.values().sum::<i64>() as f64 / 1024.0
+    }
+
     /// Recorded messages per wall second.
     fn recorder_msgs_per_s(&self) -> f64 {
         ratio(self.recorder_messages as f64, self.wall_s)
@@ -236,6 +259,8 @@ impl Figures {
             "cpu_ms_per_vehicle_s": finite(self.cpu_ms_per_vehicle_s(vehicles)),
             "rss_sum_kib": self.rss_kib,
             "rss_total_mib": self.rss_total_mib(),
+            "private_sum_kib": self.private_kib,
+            "private_total_mib": self.private_total_mib(),
             "recorder_messages": self.recorder_messages,
             "recorder_dropped": self.recorder_dropped,
             "recorder_msgs_per_s": finite(self.recorder_msgs_per_s()),
@@ -362,12 +387,13 @@ fn one_line(s: &str) -> String {
 }
 
 /// Column headings of the table.
-const HEADINGS: [&str; 11] = [
+const HEADINGS: [&str; 12] = [
     "N",
     "processes",
     "real-time factor",
     "CPU ms / vehicle-s",
     "peak RSS sum MiB",
+    "private MiB",
     "recorder msg/s",
     "drops",
     "collisions",
@@ -392,6 +418,7 @@ fn cells(r: &Row) -> Vec<String> {
                 format!("{}x", fmt_num(f.rtf())),
                 fmt_num(f.cpu_ms_per_vehicle_s(r.vehicles)),
                 fmt_num(f.rss_total_mib()),
+                fmt_num(f.private_total_mib()),
                 fmt_num(f.recorder_msgs_per_s()),
                 f.recorder_dropped.to_string(),
                 f.collisions.to_string(),
@@ -426,6 +453,7 @@ fn render_table(rows: &[Row]) -> String {
             .chain(std::iter::once(HEADINGS[i].chars().count()))
             .max()
             .unwrap_or(1)
+            .max(3)
     };
     let widths: Vec<usize> = (0..HEADINGS.len())
         .map(|i| if i == last { 0 } else { width(i) })
@@ -495,16 +523,173 @@ fn reset_own_peak_rss() -> bool {
     std::fs::write("/proc/self/clear_refs", "5").is_ok()
 }
 
-/// This process's peak RSS (`VmHWM`), KiB.
-fn own_peak_rss_kib() -> Option<i64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmHWM:"))?
-        .split_whitespace()
-        .next()?
-        .parse()
+/// How often the memory sampler reads the run's processes.
+const MEM_SAMPLE_PERIOD: Duration = Duration::from_millis(200);
+
+/// One process's memory as `/proc/PID/status` gives it, KiB.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct MemReading {
+    /// Peak resident set (`VmHWM`).
+    hwm_kib: i64,
+    /// Private anonymous pages now (`RssAnon`).
+    anon_kib: i64,
+}
+
+/// Reads `VmHWM` and `RssAnon` out of a `/proc/PID/status` text.
+fn parse_status(text: &str) -> Option<MemReading> {
+    let field = |name: &str| -> Option<i64> {
+        text.lines()
+            .find_map(|l| l.strip_prefix(name))?
+            .split_whitespace()
+            .next()?
+            .parse()
+            .ok()
+    };
+    Some(MemReading {
+        hwm_kib: field("VmHWM:")?,
+        anon_kib: field("RssAnon:").unwrap_or(0),
+    })
+}
+
+/// The process kind of a service process from its command line (the value
+/// of `--process`); `None` for anything else, including a child between
+/// fork and exec, which still carries the orchestrator's memory.
+fn kind_from_cmdline(raw: &[u8]) -> Option<String> {
+    let mut args = raw.split(|&b| b == 0);
+    while let Some(a) = args.next() {
+        if a == b"--process" {
+            return args.next().map(|k| String::from_utf8_lossy(k).into_owned());
+        }
+    }
+    None
+}
+
+/// The highest readings of every service process seen, by pid.
+#[derive(Debug, Default)]
+struct MemPeaks {
+    /// pid → (kind, highest `VmHWM`, highest `RssAnon`).
+    procs: HashMap<i32, (String, MemReading)>,
+    /// Sweeps over the children taken.
+    sweeps: u64,
+    /// CPU time of the sampler thread, s.
+    sampler_cpu_s: f64,
+}
+
+impl MemPeaks {
+    /// Reads every child of this process once.
+    fn sweep(&mut self) {
+        self.sweeps += 1;
+        for pid in child_pids() {
+            let Ok(text) = std::fs::read_to_string(format!("/proc/{pid}/status")) else {
+                continue;
+            };
+            let Some(r) = parse_status(&text) else {
+                continue;
+            };
+            let entry = match self.procs.entry(pid) {
+                std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+                std::collections::hash_map::Entry::Vacant(v) => {
+                    let Some(kind) = std::fs::read(format!("/proc/{pid}/cmdline"))
+                        .ok()
+                        .and_then(|c| kind_from_cmdline(&c))
+                    else {
+                        continue;
+                    };
+                    v.insert((kind, MemReading::default()))
+                }
+            };
+            entry.1.hwm_kib = entry.1.hwm_kib.max(r.hwm_kib);
+            entry.1.anon_kib = entry.1.anon_kib.max(r.anon_kib);
+        }
+    }
+
+    /// `(peak RSS, peak private)` summed per kind, KiB.
+    fn by_kind(&self) -> (BTreeMap<String, i64>, BTreeMap<String, i64>) {
+        let mut rss: BTreeMap<String, i64> = BTreeMap::new();
+        let mut private: BTreeMap<String, i64> = BTreeMap::new();
+        for (kind, r) in self.procs.values() {
+            *rss.entry(kind.clone()).or_default() += r.hwm_kib;
+            *private.entry(kind.clone()).or_default() += r.anon_kib;
+        }
+        (rss, private)
+    }
+}
+
+/// Children of this process (every thread's), from `/proc/self/task/*/children`.
+fn child_pids() -> Vec<i32> {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return Vec::new();
+    };
+    tasks
+        .flatten()
+        .filter_map(|t| std::fs::read_to_string(t.path().join("children")).ok())
+        .flat_map(|c| {
+            c.split_whitespace()
+                .filter_map(|p| p.parse().ok())
+                .collect::<Vec<i32>>()
+        })
+        .collect()
+}
+
+/// CPU time of the calling thread, s (`/proc/thread-self/schedstat`, or
+/// `stat` at 100 ticks per second).
+fn thread_cpu_s() -> f64 {
+    let schedstat = std::fs::read_to_string("/proc/thread-self/schedstat")
         .ok()
+        .and_then(|t| t.split_whitespace().next()?.parse::<u64>().ok())
+        .filter(|&ns| ns > 0);
+    if let Some(ns) = schedstat {
+        return ns as f64 * 1e-9;
+    }
+    std::fs::read_to_string("/proc/thread-self/stat")
+        .ok()
+        .and_then(|t| {
+            let rest = t.rsplit_once(')')?.1;
+            let f: Vec<&str> = rest.split_whitespace().collect();
+            let ticks = f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?;
+            Some(ticks as f64 / 100.0)
+        })
+        .unwrap_or(0.0)
+}
+
+/// A thread that sweeps the run's processes every [`MEM_SAMPLE_PERIOD`]:
+/// `VmHWM` is the peak of the process's own address space since its exec
+/// (the `ru_maxrss` that `wait4` reports also counts the orchestrator's
+/// memory that the child held between fork and exec).
+struct MemSampler {
+    stop: Arc<AtomicBool>,
+    handle: std::thread::JoinHandle<MemPeaks>,
+}
+
+impl MemSampler {
+    fn start() -> anyhow::Result<Self> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = Arc::clone(&stop);
+        let handle = std::thread::Builder::new()
+            .name("mem-sampler".into())
+            .spawn(move || {
+                let mut peaks = MemPeaks::default();
+                while !flag.load(Ordering::Relaxed) {
+                    peaks.sweep();
+                    std::thread::park_timeout(MEM_SAMPLE_PERIOD);
+                }
+                peaks.sampler_cpu_s = thread_cpu_s();
+                peaks
+            })
+            .context("cannot start the memory sampler thread")?;
+        Ok(Self { stop, handle })
+    }
+
+    fn finish(self) -> MemPeaks {
+        self.stop.store(true, Ordering::Relaxed);
+        self.handle.thread().unpark();
+        self.handle.join().unwrap_or_default()
+    }
+}
+
+/// This process's `VmHWM` and `RssAnon`.
+fn own_memory() -> Option<MemReading> {
+    parse_status(&std::fs::read_to_string("/proc/self/status").ok()?)
 }
 
 /// Generates the scenario of `n` vehicles, cut to `duration_s`, resolved.
@@ -523,8 +708,9 @@ fn scenario_for(cmd: &ScaleCmd, n: usize) -> anyhow::Result<Scenario> {
     Ok(s)
 }
 
-/// Runs one resolved scenario into `dir`: summary.json (with `rss_sum_kib`,
-/// the orchestrator's peak included) and, if asked, the figures.
+/// Runs one resolved scenario into `dir`: summary.json (with a
+/// `memory_sampled` section: peak RSS and private memory per kind, the
+/// orchestrator's included) and, if asked, the figures.
 fn run_one(
     scenario: &Scenario,
     dir: &Path,
@@ -542,16 +728,30 @@ fn run_one(
     };
     let peak_reset = reset_own_peak_rss();
     let cpu_before = sys::self_cpu_s();
-    let outcome = run::run(&opts)?;
-    let mut rss = outcome.rss_sum_kib.clone();
-    if let Some(own) = own_peak_rss_kib() {
-        rss.insert("orchestrator".into(), own);
+    let sampler = MemSampler::start()?;
+    let outcome = run::run(&opts);
+    let peaks = sampler.finish();
+    let outcome = outcome?;
+    let (mut rss, mut private) = peaks.by_kind();
+    if let Some(own) = own_memory() {
+        rss.insert("orchestrator".into(), own.hwm_kib);
+        private.insert("orchestrator".into(), own.anon_kib);
     }
     let rec = recordings::Recording::open(&outcome.recording)?;
     let mut s = summary::summarize(scenario, &rec, &outcome, settings.mode.as_str());
     if let Some(obj) = s.as_object_mut() {
-        obj.insert("rss_sum_kib".into(), json!(rss));
-        obj.insert("orchestrator_peak_rss_reset".into(), json!(peak_reset));
+        obj.insert(
+            "memory_sampled".into(),
+            json!({
+                "peak_rss_kib": rss,
+                "peak_private_kib": private,
+                "processes_sampled": peaks.procs.len(),
+                "sweeps": peaks.sweeps,
+                "period_s": MEM_SAMPLE_PERIOD.as_secs_f64(),
+                "sampler_cpu_s": peaks.sampler_cpu_s,
+                "orchestrator_peak_reset": peak_reset,
+            }),
+        );
     }
     let path = dir.join("summary.json");
     std::fs::write(&path, serde_json::to_string_pretty(&s)?)
@@ -878,11 +1078,13 @@ mod tests {
     }
 
     fn figures(sim_s: f64, wall_s: f64, cpu: &[(&str, f64)], rss: &[(&str, i64)]) -> Figures {
+        let private = rss.iter().map(|(k, v)| (k.to_string(), *v / 2)).collect();
         Figures {
             sim_s,
             wall_s,
             cpu_s: cpu.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
             rss_kib: rss.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            private_kib: private,
             recorder_messages: 1000,
             recorder_dropped: 0,
             collisions: 0,
@@ -930,23 +1132,60 @@ mod tests {
         let s = json!({
             "sim_time_s": 20.0, "wall_time_s": 8.0,
             "cpu_time_s": { "mpc": 6.0, "orchestrator": 12.0, "world": 1.0 },
-            "rss_sum_kib": { "mpc": 20480, "orchestrator": 10240 },
+            "memory_sampled": {
+                "peak_rss_kib": { "mpc": 20480, "orchestrator": 10240 },
+                "peak_private_kib": { "mpc": 2048, "orchestrator": 1024 },
+                "sampler_cpu_s": 0.25,
+            },
             "recording": { "messages": 4000, "dropped": 2 },
             "safety": { "collisions": 0, "min_pair_distance_m": 2.5, "safe_distance_m": 2.0 },
             "perception": { "leader_visible_fraction": { "F1": 0.9, "F2": 0.75 } },
         });
-        let f = Figures::from_summary(&s, 11.0).unwrap();
+        // The orchestrator: 12 s cumulative − 10.75 s before − 0.25 s sampler.
+        let f = Figures::from_summary(&s, 10.75).unwrap();
         assert_eq!(f.cpu_s["orchestrator"], 1.0);
         assert_eq!(f.cpu_total_s(), 8.0);
         assert_eq!(f.rtf(), 2.5);
         // 8 s of CPU over 5 vehicles × 20 s = 80 ms per vehicle-second.
         approx::assert_relative_eq!(f.cpu_ms_per_vehicle_s(5), 80.0, epsilon = 1e-12);
         assert_eq!(f.rss_total_mib(), 30.0);
+        assert_eq!(f.private_total_mib(), 3.0);
         assert_eq!(f.recorder_msgs_per_s(), 500.0);
         assert_eq!(f.recorder_dropped, 2);
         assert_eq!(f.min_parent_visible, Some(0.75));
         assert_eq!(f.min_pair_m, Some(2.5));
         assert!(Figures::from_summary(&json!({ "sim_time_s": 1.0 }), 0.0).is_err());
+    }
+
+    #[test]
+    fn memory_readings_come_from_status_and_the_kind_from_the_command_line() {
+        let status = "Name:\tshoal-mpc\nVmPeak:\t  99999 kB\nVmHWM:\t   14000 kB\nVmRSS:\t   12000 kB\nRssAnon:\t    3000 kB\nRssFile:\t    9000 kB\n";
+        assert_eq!(
+            parse_status(status),
+            Some(MemReading {
+                hwm_kib: 14000,
+                anon_kib: 3000
+            })
+        );
+        assert_eq!(parse_status("Name:\tx\n"), None);
+        let cmdline =
+            b"/bin/shoal-mpc\0--run-id\0ab12\0--vehicle\0F1\0--process\0mpc\0--index\x003\0";
+        assert_eq!(kind_from_cmdline(cmdline), Some("mpc".to_string()));
+        // The orchestrator's own command line (a child before exec).
+        assert_eq!(kind_from_cmdline(b"shoal\0bench\0scale\0"), None);
+        let mut peaks = MemPeaks::default();
+        let r = |h, a| MemReading {
+            hwm_kib: h,
+            anon_kib: a,
+        };
+        peaks.procs.insert(10, ("mpc".into(), r(100, 10)));
+        peaks.procs.insert(11, ("mpc".into(), r(300, 30)));
+        peaks.procs.insert(12, ("world".into(), r(50, 5)));
+        let (rss, private) = peaks.by_kind();
+        assert_eq!(rss["mpc"], 400);
+        assert_eq!(rss["world"], 50);
+        assert_eq!(private["mpc"], 40);
+        assert_eq!(private["world"], 5);
     }
 
     #[test]
@@ -1007,22 +1246,23 @@ mod tests {
         let header = cols(t.lines().next().unwrap());
         assert_eq!(header.len(), HEADINGS.len());
         // N = 25: 5 s CPU over 25 × 20 vehicle-s = 10 ms; 2x real time;
-        // 1 MiB; 1000 messages over 10 s.
+        // 1 MiB RSS, 0.5 MiB private; 1000 messages over 10 s.
         let r25 = cols(&row("25"));
         assert_eq!(r25.len(), HEADINGS.len());
         assert_eq!(r25[1], "126");
         assert_eq!(r25[2], "2.00x");
         assert_eq!(r25[3], "10.0");
         assert_eq!(r25[4], "1.00");
-        assert_eq!(r25[5], "100");
-        assert_eq!(r25[9], "97%");
-        assert_eq!(r25[10], "");
+        assert_eq!(r25[5], "0.500");
+        assert_eq!(r25[6], "100");
+        assert_eq!(r25[10], "97%");
+        assert_eq!(r25[11], "");
         assert!(row("50").contains("UNHEALTHY"), "{t}");
         let r100 = cols(&row("100"));
         assert_eq!(r100.len(), HEADINGS.len(), "{t}");
         assert_eq!(r100[1], "501");
         assert!(
-            r100[10].starts_with("skipped: vehicles: the run needs 502"),
+            r100[11].starts_with("skipped: vehicles: the run needs 502"),
             "{t}"
         );
         // The ratio line: N = 50 (largest that ran) against N = 25.

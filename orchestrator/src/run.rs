@@ -53,9 +53,6 @@ pub struct RunOutcome {
     pub cpu_time_s: BTreeMap<String, f64>,
     /// Peak RSS by process kind, KiB (largest single process).
     pub max_rss_kib: BTreeMap<String, i64>,
-    /// Peak RSS by process kind, KiB, summed over the processes of the kind
-    /// (shared pages count once per process that touched them).
-    pub rss_sum_kib: BTreeMap<String, i64>,
     /// Processes spawned.
     pub processes: usize,
     /// Ticks driven (lockstep).
@@ -273,12 +270,10 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     joined?;
     let mut cpu_time_s: BTreeMap<String, f64> = BTreeMap::new();
     let mut max_rss_kib: BTreeMap<String, i64> = BTreeMap::new();
-    let mut rss_sum_kib: BTreeMap<String, i64> = BTreeMap::new();
     for c in sup.children() {
         let name = c.spec.kind.name().to_string();
         if let Some(e) = c.exit {
             *cpu_time_s.entry(name.clone()).or_default() += e.cpu_s;
-            *rss_sum_kib.entry(name.clone()).or_default() += e.max_rss_kib;
             let m = max_rss_kib.entry(name).or_default();
             *m = (*m).max(e.max_rss_kib);
         }
@@ -308,7 +303,6 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         sim_time_s: ticks as f64 * scenario.rates.tick_s,
         cpu_time_s,
         max_rss_kib,
-        rss_sum_kib,
         processes: procs.len(),
         ticks,
         stats,
