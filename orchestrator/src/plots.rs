@@ -570,7 +570,9 @@ fn plot_px((w, h): (u32, u32)) -> (f64, f64) {
     )
 }
 
-pub(crate) fn chart<'a, 'b, DB: DrawingBackend>(area: &'a DrawingArea<DB, Shift>) -> ChartBuilder<'a, 'b, DB> {
+pub(crate) fn chart<'a, 'b, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+) -> ChartBuilder<'a, 'b, DB> {
     let mut b = ChartBuilder::on(area);
     b.margin_top(MARGIN)
         .margin_bottom(MARGIN)
