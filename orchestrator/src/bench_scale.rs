@@ -13,6 +13,8 @@
 //!
 //! * **processes**: service processes spawned (the orchestrator not counted);
 //! * **real-time factor**: simulated s / wall s, first tick to last;
+//! * **start+stop**: wall time of the run outside the ticks (spawning every
+//!   process, waiting for all to be ready, stopping and reaping them), s;
 //! * **CPU per vehicle-second**: user + system CPU time of every process of
 //!   the run, the orchestrator's share included (start-up and shutdown
 //!   too), divided by N × simulated s, in ms;
@@ -66,6 +68,7 @@ const REFERENCE_N: usize = 25;
     long_about = "What a group costs as it grows. For each N of --vehicles, generate a scenario \
                   as `shoal gen --vehicles N --shape SHAPE --seed SEED` does, run it in lockstep \
                   for --duration-s simulated seconds and report: processes, real-time factor, \
+                  wall time spent starting and stopping the processes, \
                   total CPU time per vehicle-second (every process, the orchestrator included), \
                   peak memory (sum of every process's peak RSS, and of its private memory, \
                   sampled from /proc every 0.2 s), recorder messages/s and drops, \
@@ -134,6 +137,9 @@ struct Figures {
     sim_s: f64,
     /// Wall time, first tick to last, s.
     wall_s: f64,
+    /// Wall time of the whole run: spawning, start-up, the ticks, stopping
+    /// and reaping every process, s (`None` if the summary lacks it).
+    run_call_s: Option<f64>,
     /// CPU time per process kind, the orchestrator's of this run only, s.
     cpu_s: BTreeMap<String, f64>,
     /// Peak RSS (`VmHWM`) summed over the processes of each kind, KiB.
@@ -205,6 +211,7 @@ impl Figures {
         Ok(Self {
             sim_s: num("/sim_time_s")?,
             wall_s: num("/wall_time_s")?,
+            run_call_s: s.pointer("/run_call_s").and_then(Value::as_f64),
             cpu_s,
             rss_kib: per_kind("peak_rss_kib")?,
             private_kib: per_kind("peak_private_kib")?,
@@ -244,6 +251,11 @@ impl Figures {
         self.private_kib.values().sum::<i64>() as f64 / 1024.0
     }
 
+    /// Wall time outside the ticks (start-up and shutdown), s.
+    fn start_stop_s(&self) -> Option<f64> {
+        self.run_call_s.map(|t| (t - self.wall_s).max(0.0))
+    }
+
     /// Recorded messages per wall second.
     fn recorder_msgs_per_s(&self) -> f64 {
         ratio(self.recorder_messages as f64, self.wall_s)
@@ -253,6 +265,8 @@ impl Figures {
         json!({
             "sim_s": self.sim_s,
             "wall_s": self.wall_s,
+            "run_call_s": self.run_call_s,
+            "start_stop_s": self.start_stop_s(),
             "real_time_factor": finite(self.rtf()),
             "cpu_s": self.cpu_s,
             "cpu_total_s": self.cpu_total_s(),
@@ -387,10 +401,11 @@ fn one_line(s: &str) -> String {
 }
 
 /// Column headings of the table.
-const HEADINGS: [&str; 12] = [
+const HEADINGS: [&str; 13] = [
     "N",
     "processes",
     "real-time factor",
+    "start+stop s",
     "CPU ms / vehicle-s",
     "peak RSS sum MiB",
     "private MiB",
@@ -416,6 +431,7 @@ fn cells(r: &Row) -> Vec<String> {
                 r.vehicles.to_string(),
                 procs,
                 format!("{}x", fmt_num(f.rtf())),
+                f.start_stop_s().map_or("-".to_string(), fmt_num),
                 fmt_num(f.cpu_ms_per_vehicle_s(r.vehicles)),
                 fmt_num(f.rss_total_mib()),
                 fmt_num(f.private_total_mib()),
@@ -729,7 +745,9 @@ fn run_one(
     let peak_reset = reset_own_peak_rss();
     let cpu_before = sys::self_cpu_s();
     let sampler = MemSampler::start()?;
+    let t0 = Instant::now();
     let outcome = run::run(&opts);
+    let run_call_s = t0.elapsed().as_secs_f64();
     let peaks = sampler.finish();
     let outcome = outcome?;
     let (mut rss, mut private) = peaks.by_kind();
@@ -740,6 +758,7 @@ fn run_one(
     let rec = recordings::Recording::open(&outcome.recording)?;
     let mut s = summary::summarize(scenario, &rec, &outcome, settings.mode.as_str());
     if let Some(obj) = s.as_object_mut() {
+        obj.insert("run_call_s".into(), json!(run_call_s));
         obj.insert(
             "memory_sampled".into(),
             json!({
@@ -1083,6 +1102,7 @@ mod tests {
         Figures {
             sim_s,
             wall_s,
+            run_call_s: Some(wall_s + 4.0),
             cpu_s: cpu.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
             rss_kib: rss.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
             private_kib: private,
@@ -1131,7 +1151,7 @@ mod tests {
     #[test]
     fn figures_are_read_from_the_summary_with_this_runs_orchestrator_cpu() {
         let s = json!({
-            "sim_time_s": 20.0, "wall_time_s": 8.0,
+            "sim_time_s": 20.0, "wall_time_s": 8.0, "run_call_s": 11.5,
             "cpu_time_s": { "mpc": 6.0, "orchestrator": 12.0, "world": 1.0 },
             "memory_sampled": {
                 "peak_rss_kib": { "mpc": 20480, "orchestrator": 10240 },
@@ -1151,6 +1171,7 @@ mod tests {
         approx::assert_relative_eq!(f.cpu_ms_per_vehicle_s(5), 80.0, epsilon = 1e-12);
         assert_eq!(f.rss_total_mib(), 30.0);
         assert_eq!(f.private_total_mib(), 3.0);
+        assert_eq!(f.start_stop_s(), Some(3.5));
         assert_eq!(f.recorder_msgs_per_s(), 500.0);
         assert_eq!(f.recorder_dropped, 2);
         assert_eq!(f.min_parent_visible, Some(0.75));
@@ -1246,24 +1267,26 @@ mod tests {
         };
         let header = cols(t.lines().next().unwrap());
         assert_eq!(header.len(), HEADINGS.len());
-        // N = 25: 5 s CPU over 25 × 20 vehicle-s = 10 ms; 2x real time;
+        // N = 25: 5 s CPU over 25 × 20 vehicle-s = 10 ms; 2x real time; 4 s
+        // outside the ticks;
         // 1 MiB RSS, 0.5 MiB private; 1000 messages over 10 s.
         let r25 = cols(&row("25"));
         assert_eq!(r25.len(), HEADINGS.len());
         assert_eq!(r25[1], "126");
         assert_eq!(r25[2], "2.00x");
-        assert_eq!(r25[3], "10.0");
-        assert_eq!(r25[4], "1.00");
-        assert_eq!(r25[5], "0.500");
-        assert_eq!(r25[6], "100");
-        assert_eq!(r25[10], "97%");
-        assert_eq!(r25[11], "");
+        assert_eq!(r25[3], "4.00");
+        assert_eq!(r25[4], "10.0");
+        assert_eq!(r25[5], "1.00");
+        assert_eq!(r25[6], "0.500");
+        assert_eq!(r25[7], "100");
+        assert_eq!(r25[11], "97%");
+        assert_eq!(r25[12], "");
         assert!(row("50").contains("UNHEALTHY"), "{t}");
         let r100 = cols(&row("100"));
         assert_eq!(r100.len(), HEADINGS.len(), "{t}");
         assert_eq!(r100[1], "501");
         assert!(
-            r100[11].starts_with("skipped: vehicles: the run needs 502"),
+            r100[12].starts_with("skipped: vehicles: the run needs 502"),
             "{t}"
         );
         // The ratio line: N = 50 (largest that ran) against N = 25.
