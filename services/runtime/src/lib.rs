@@ -25,7 +25,7 @@
 //! # fn main() -> anyhow::Result<()> {
 //! let args = RunArgs { run_id: "test".into(), vehicle: "L".into(), process: "idle".into(),
 //!     index: 0, mode: shoal_runtime::Mode::Lockstep, period_s: 0.1, epoch_mono_ns: 0,
-//!     processes: 1, phase_s: 0.0, spin_us: 0 };
+//!     processes: 1, phase_s: 0.0, spin_us: 0, restart: 0, resume: None };
 //! let rt = Runtime::new(&args)?;
 //! rt.run(Idle)?;
 //! # Ok(()) }
