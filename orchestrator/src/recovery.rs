@@ -212,7 +212,10 @@ pub(crate) struct Recovery {
     /// Restarts so far, per process index.
     restarts: Vec<u32>,
     /// Processes whose "ready" is awaited: since when, and how long it may take.
-    pub(crate) awaiting: Vec<Option<(Instant, Duration)>>,
+    awaiting: Vec<Option<(Instant, Duration)>>,
+    /// How many entries of `awaiting` are set (the wait loop asks on every
+    /// pass; this keeps the answer O(1) with hundreds of processes).
+    awaiting_count: usize,
     /// The latest truth of each vehicle, by its sim-plant's process index
     /// (policy `restart` only).
     truths: Vec<(usize, Subscriber<Truth>, Option<Truth>)>,
@@ -230,6 +233,7 @@ impl Recovery {
             restart_timeout: Duration::from_secs(10),
             restarts: vec![0; processes],
             awaiting: vec![None; processes],
+            awaiting_count: 0,
             truths: Vec::new(),
             launch: None,
             recording_parts: Vec::new(),
@@ -278,13 +282,16 @@ impl Recovery {
     /// Awaits the "ready" of `index` for at most `timeout`.
     pub(crate) fn await_ready(&mut self, index: usize, timeout: Duration) {
         if let Some(a) = self.awaiting.get_mut(index) {
+            if a.is_none() {
+                self.awaiting_count += 1;
+            }
             *a = Some((Instant::now(), timeout));
         }
     }
 
     /// True while some process has not reported ready.
     pub(crate) fn any_awaiting(&self) -> bool {
-        self.awaiting.iter().any(Option::is_some)
+        self.awaiting_count > 0
     }
 
     /// A "ready" from `index` arrived: ends its gap (an event if it was a
@@ -299,6 +306,7 @@ impl Recovery {
         let Some((since, _)) = self.awaiting.get_mut(index).and_then(Option::take) else {
             return false;
         };
+        self.awaiting_count -= 1;
         let restarts = self.restarts.get(index).copied().unwrap_or(0);
         if restarts > 0 {
             let gap = since.elapsed().as_secs_f64();
@@ -314,6 +322,9 @@ impl Recovery {
 
     /// The processes whose "ready" is overdue.
     pub(crate) fn overdue(&self, procs: &[ProcessSpec]) -> Vec<String> {
+        if self.awaiting_count == 0 {
+            return Vec::new();
+        }
         self.awaiting
             .iter()
             .enumerate()
