@@ -377,7 +377,7 @@ impl Recovery {
             .then(|| self.handover_truth(spec, launch, n))
             .flatten();
         let args = launch.args(spec, n, resume.as_deref());
-        if let Err(e) = sup.respawn(spec, &launch.binary(spec), &args, &launch.log(spec), n) {
+        if let Err(e) = sup.spawn(spec, &launch.binary(spec), &args, &launch.log(spec), n) {
             tracing::error!(process = %d.label, %e, "cannot restart");
             let mut h = Happening::new(EventKind::RunAborted, t_s, Some(spec));
             h.detail = format!("cannot restart {}: {e}", d.label);

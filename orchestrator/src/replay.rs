@@ -584,7 +584,7 @@ fn drive(
     }
 
     let (binary, args, log) = command();
-    sup.spawn(spec, &binary, &args, &log)
+    sup.spawn(spec, &binary, &args, &log, 0)
         .with_context(|| format!("cannot start {}", spec.label()))?;
     wait_ready(
         ports,

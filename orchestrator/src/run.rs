@@ -231,6 +231,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
                 &launch.binary(p),
                 &launch.args(p, 0, None),
                 &launch.log(p),
+                0,
             )
             .with_context(|| format!("cannot start {}", p.label()))?;
         }

@@ -50,31 +50,10 @@ pub struct Death {
 }
 
 impl Supervisor {
-    /// Spawns one child with the given arguments; stderr and stdout go to `log`.
+    /// Spawns one child with the given arguments; stderr and stdout go to
+    /// `log`. `incarnation` is 0 for a process's first start and n for its
+    /// n-th restart, whose log goes on in the same file after a marker line.
     pub fn spawn(
-        &mut self,
-        spec: &ProcessSpec,
-        binary: &Path,
-        args: &[String],
-        log: &Path,
-    ) -> std::io::Result<()> {
-        self.launch(spec, binary, args, log, 0)
-    }
-
-    /// Starts process `spec` again after it died (its `incarnation`-th
-    /// restart); its log goes on in the same file after a marker line.
-    pub fn respawn(
-        &mut self,
-        spec: &ProcessSpec,
-        binary: &Path,
-        args: &[String],
-        log: &Path,
-        incarnation: u32,
-    ) -> std::io::Result<()> {
-        self.launch(spec, binary, args, log, incarnation)
-    }
-
-    fn launch(
         &mut self,
         spec: &ProcessSpec,
         binary: &Path,
