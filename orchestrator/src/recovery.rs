@@ -182,25 +182,22 @@ impl Journal {
         if let Err(err) = self.publisher.publish_stamped(e) {
             tracing::warn!(%err, "cannot publish an event");
         }
-        let mut json = serde_json::json!({
-            "t_s": h.t_s,
-            "event": h.kind.name(),
-        });
-        if let (Some(map), Some(more)) = (json.as_object_mut(), extra.as_object()) {
-            if h.process.is_some() {
-                map.insert("process".into(), label.into());
-            }
-            if let Some(x) = h.exit {
-                map.insert("exit".into(), x.describe().into());
-            }
-            if !h.detail.is_empty() {
-                map.insert("detail".into(), h.detail.clone().into());
-            }
-            for (k, v) in more {
-                map.insert(k.clone(), v.clone());
-            }
+        let mut map = serde_json::Map::new();
+        map.insert("t_s".into(), h.t_s.into());
+        map.insert("event".into(), h.kind.name().into());
+        if h.process.is_some() {
+            map.insert("process".into(), label.into());
         }
-        self.list.push(json);
+        if let Some(x) = h.exit {
+            map.insert("exit".into(), x.describe().into());
+        }
+        if !h.detail.is_empty() {
+            map.insert("detail".into(), h.detail.into());
+        }
+        if let serde_json::Value::Object(more) = extra {
+            map.extend(more);
+        }
+        self.list.push(serde_json::Value::Object(map));
     }
 }
 
