@@ -397,15 +397,6 @@ impl Bench<'_> {
     }
 }
 
-fn load_average() -> Option<f64> {
-    std::fs::read_to_string("/proc/loadavg")
-        .ok()?
-        .split_whitespace()
-        .next()?
-        .parse()
-        .ok()
-}
-
 /// Runs `shoal bench ipc`.
 pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
     if cmd.iterations == 0 || cmd.passes == 0 {
@@ -454,7 +445,7 @@ pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
     };
 
     let per_pass = cmd.iterations.div_ceil(cmd.passes);
-    let load_before = load_average();
+    let load_before = crate::sys::load_average();
     let start = Instant::now();
     let mut rtts: Vec<Vec<Vec<u64>>> = vec![vec![Vec::new(); cases.len()]; cmd.sizes.len()];
     let mut preempted: Vec<Vec<Option<u64>>> = vec![vec![None; cases.len()]; cmd.sizes.len()];
@@ -500,7 +491,7 @@ pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
             .collect::<anyhow::Result<_>>()?
     };
     let wall_s = start.elapsed().as_secs_f64();
-    let load_after = load_average();
+    let load_after = crate::sys::load_average();
 
     let mut stats = Vec::new();
     for (si, &size) in cmd.sizes.iter().enumerate() {

@@ -334,15 +334,6 @@ impl Drop for Scratch {
     }
 }
 
-fn load_average() -> Option<f64> {
-    std::fs::read_to_string("/proc/loadavg")
-        .ok()?
-        .split_whitespace()
-        .next()?
-        .parse()
-        .ok()
-}
-
 /// Runs `scenario` once into `out`; returns its summary and this process's
 /// CPU time when it started.
 fn one_run(
@@ -377,7 +368,7 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
     std::fs::create_dir_all(&scratch.path)
         .with_context(|| format!("cannot create {}", scratch.path.display()))?;
     let started = Instant::now();
-    let load_before = load_average();
+    let load_before = crate::sys::load_average();
 
     let mut variants = vec![
         Variant {
@@ -433,7 +424,7 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
     } else {
         None
     };
-    let load_after = load_average();
+    let load_after = crate::sys::load_average();
     let elapsed = started.elapsed().as_secs_f64();
 
     let load = |l: Option<f64>| l.map_or("?".to_string(), |x| format!("{x:.2}"));

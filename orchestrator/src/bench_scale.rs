@@ -524,15 +524,6 @@ fn ratio_line(rows: &[Row]) -> String {
     }
 }
 
-fn load_average() -> Option<f64> {
-    std::fs::read_to_string("/proc/loadavg")
-        .ok()?
-        .split_whitespace()
-        .next()?
-        .parse()
-        .ok()
-}
-
 /// Resets this process's peak RSS (`VmHWM`) to its current RSS, so the
 /// next reading is the peak of the coming run; false if the kernel refused.
 fn reset_own_peak_rss() -> bool {
@@ -816,7 +807,7 @@ pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let settings = RunSettings::new(Mode::Lockstep, cmd.bin_dir.clone(), false, cmd.tick_timeout)?;
     let started = Instant::now();
-    let load_before = load_average();
+    let load_before = crate::sys::load_average();
     let mut rows: Vec<Row> = Vec::with_capacity(sizes.len());
     let mut stopped: Option<anyhow::Error> = None;
     for (i, &n) in sizes.iter().enumerate() {
@@ -891,7 +882,7 @@ pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
             status,
         });
     }
-    let load_after = load_average();
+    let load_after = crate::sys::load_average();
     let elapsed = started.elapsed().as_secs_f64();
 
     let load = |l: Option<f64>| l.map_or("?".to_string(), |x| format!("{x:.2}"));
