@@ -83,31 +83,43 @@ struct LockstepRun {
     cpu_s: BTreeMap<String, f64>,
 }
 
+/// The number at JSON pointer `p` of a run's summary.json.
+pub(crate) fn summary_number(s: &Value, p: &str) -> anyhow::Result<f64> {
+    s.pointer(p)
+        .and_then(Value::as_f64)
+        .with_context(|| format!("summary.json has no number at {p}"))
+}
+
+/// CPU seconds by process kind from a run's summary.json, with
+/// `not_this_run_s` taken off the orchestrator's: its figure is this
+/// process's cumulative CPU, which in a benchmark spans earlier runs.
+pub(crate) fn summary_cpu_s(
+    s: &Value,
+    not_this_run_s: f64,
+) -> anyhow::Result<BTreeMap<String, f64>> {
+    let mut cpu_s: BTreeMap<String, f64> = s
+        .get("cpu_time_s")
+        .and_then(Value::as_object)
+        .context("summary.json has no cpu_time_s")?
+        .iter()
+        .filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x)))
+        .collect();
+    if let Some(o) = cpu_s.get_mut("orchestrator") {
+        *o = (*o - not_this_run_s).max(0.0);
+    }
+    Ok(cpu_s)
+}
+
 impl LockstepRun {
     /// Reads a run's figures from its summary. `orchestrator_cpu_before` is
     /// this process's CPU time when the run started: the summary reports
     /// the orchestrator's cumulative CPU, which here spans earlier runs.
     fn from_summary(s: &Value, orchestrator_cpu_before: f64) -> anyhow::Result<Self> {
-        let num = |p: &str| {
-            s.pointer(p)
-                .and_then(Value::as_f64)
-                .with_context(|| format!("summary.json has no number at {p}"))
-        };
-        let mut cpu_s: BTreeMap<String, f64> = s
-            .get("cpu_time_s")
-            .and_then(Value::as_object)
-            .context("summary.json has no cpu_time_s")?
-            .iter()
-            .filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x)))
-            .collect();
-        if let Some(o) = cpu_s.get_mut("orchestrator") {
-            *o = (*o - orchestrator_cpu_before).max(0.0);
-        }
         Ok(Self {
-            rtf: num("/real_time_factor")?,
-            wall_s: num("/wall_time_s")?,
-            sim_s: num("/sim_time_s")?,
-            cpu_s,
+            rtf: summary_number(s, "/real_time_factor")?,
+            wall_s: summary_number(s, "/wall_time_s")?,
+            sim_s: summary_number(s, "/sim_time_s")?,
+            cpu_s: summary_cpu_s(s, orchestrator_cpu_before)?,
         })
     }
 

@@ -168,30 +168,17 @@ impl Figures {
     /// orchestrator's cumulative CPU, which here spans earlier runs; the
     /// memory sampler's own CPU is taken out of it too.
     fn from_summary(s: &Value, orchestrator_cpu_before: f64) -> anyhow::Result<Self> {
-        let num = |p: &str| {
-            s.pointer(p)
-                .and_then(Value::as_f64)
-                .with_context(|| format!("summary.json has no number at {p}"))
-        };
+        let num = |p: &str| crate::bench_run::summary_number(s, p);
         let count = |p: &str| {
             s.pointer(p)
                 .and_then(Value::as_u64)
                 .with_context(|| format!("summary.json has no count at {p}"))
         };
-        let mut cpu_s: BTreeMap<String, f64> = s
-            .get("cpu_time_s")
-            .and_then(Value::as_object)
-            .context("summary.json has no cpu_time_s")?
-            .iter()
-            .filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x)))
-            .collect();
         let sampler_cpu_s = s
             .pointer("/memory_sampled/sampler_cpu_s")
             .and_then(Value::as_f64)
             .unwrap_or(0.0);
-        if let Some(o) = cpu_s.get_mut("orchestrator") {
-            *o = (*o - orchestrator_cpu_before - sampler_cpu_s).max(0.0);
-        }
+        let cpu_s = crate::bench_run::summary_cpu_s(s, orchestrator_cpu_before + sampler_cpu_s)?;
         let per_kind = |key: &str| -> anyhow::Result<BTreeMap<String, i64>> {
             Ok(s.pointer(&format!("/memory_sampled/{key}"))
                 .and_then(Value::as_object)
