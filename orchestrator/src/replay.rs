@@ -443,28 +443,22 @@ fn rerun(rec: &Recording, cmd: &ReplayCmd, kind_name: &str) -> anyhow::Result<Re
     let procs = vec![spec.clone()];
     let mut ports = Ports::open(&run_id, &procs)?;
     let mut sup = Supervisor::default();
+    // The process is started as `shoal run` starts it, alone in its run.
+    let launch = crate::recovery::Launch {
+        bin_dir: bin_dir.clone(),
+        out: dir.clone(),
+        run_id: run_id.clone(),
+        processes: 1,
+        mode: Mode::Lockstep,
+        epoch_mono_ns: 0,
+        spin_us: 0,
+        scenario_path: scenario_path.clone(),
+        scenario: scenario.clone(),
+    };
     let result = drive(rec, &scenario, &spec, &run_id, &mut ports, &mut sup, || {
-        let args = vec![
-            "--run-id".to_string(),
-            run_id.clone(),
-            "--vehicle".into(),
-            spec.vehicle.clone(),
-            "--process".into(),
-            kind.name().into(),
-            "--index".into(),
-            "0".into(),
-            "--processes".into(),
-            "1".into(),
-            "--mode".into(),
-            Mode::Lockstep.as_str().into(),
-            "--period-s".into(),
-            format!("{}", 1.0 / scenario.rate_hz(kind)),
-            "--scenario".into(),
-            scenario_path.display().to_string(),
-        ];
         (
             binary.clone(),
-            args,
+            launch.args(&spec, 0, None),
             dir.join(format!("{}.{}.log", spec.vehicle, kind.name())),
         )
     });
