@@ -176,8 +176,7 @@ fn a_killed_process_under_the_abort_policy_stops_the_run_cleanly_with_the_cause(
         .as_str()
         .unwrap()
         .to_string();
-    assert!(shoal_runtime::list_domain_files(&run_id).is_empty());
-    assert!(processes_mentioning(&run_id).is_empty());
+    assert_domain_clean(&run_id);
     // What was recorded up to the kill reads.
     let rec = Recording::open(&out.join("recording.mcap")).unwrap();
     let truth = rec.samples::<ipc_types::Truth>("/F3/truth");

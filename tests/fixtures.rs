@@ -7,6 +7,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Output;
+use std::time::Duration;
 
 use shoal_tests::*;
 
@@ -53,18 +54,11 @@ fn run_with_fixture(what: &str, extra: &str, duration: &str, more: &[&str]) -> (
         .env("SHOAL_FIXTURE_REAL", bin_dir().join("shoal-sonar"))
         .output()
         .unwrap();
-    let run: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
-    let run_id = run["run_id"].as_str().unwrap().to_string();
     // Nothing left behind, however the run ended.
-    assert!(
-        processes_mentioning(&run_id).is_empty(),
-        "{what}: orphans {:?}",
-        processes_mentioning(&run_id)
-    );
-    assert!(
-        shoal_runtime::list_domain_files(&run_id).is_empty(),
-        "{what}: stale shared memory"
+    assert_domain_clean(
+        wait_run_json(&out, Duration::ZERO)["run_id"]
+            .as_str()
+            .unwrap(),
     );
     let log = std::fs::read_to_string(out.join("logs/F1.sonar.log")).unwrap_or_default();
     (o, log)

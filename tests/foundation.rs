@@ -6,7 +6,6 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
@@ -14,23 +13,6 @@ use iceoryx2::node::NodeView;
 use iceoryx2::prelude::*;
 use recordings::Recording;
 use shoal_tests::*;
-
-fn summary(out: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
-}
-
-fn assert_domain_clean(run_id: &str) {
-    let left = shoal_runtime::list_domain_files(run_id);
-    assert!(
-        left.is_empty(),
-        "stale shared memory of run {run_id}: {left:?}"
-    );
-    let procs = processes_mentioning(run_id);
-    assert!(
-        procs.is_empty(),
-        "orphan processes of run {run_id}: {procs:?}"
-    );
-}
 
 #[test]
 fn paper_run_records_every_channel_and_the_official_readers_decode_it() {

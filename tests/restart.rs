@@ -6,6 +6,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use ipc_types::{EventKind, Sample};
+use std::time::Duration;
+
 use recordings::Recording;
 use shoal_tests::*;
 
@@ -70,23 +72,14 @@ fn trial(i: u64) {
     assert!(o.status.success(), "trial {i} ({label} at {at_s} s): {err}");
 
     // Nothing left behind.
-    let run: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
-    let run_id = run["run_id"].as_str().unwrap();
-    assert!(
-        processes_mentioning(run_id).is_empty(),
-        "trial {i}: orphans {:?}",
-        processes_mentioning(run_id)
-    );
-    assert!(
-        shoal_runtime::list_domain_files(run_id).is_empty(),
-        "trial {i}: stale shared memory {:?}",
-        shoal_runtime::list_domain_files(run_id)
+    assert_domain_clean(
+        wait_run_json(&out, Duration::ZERO)["run_id"]
+            .as_str()
+            .unwrap(),
     );
 
     // The run went on safely, to the end.
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary = summary(&out);
     assert_eq!(
         summary["safety"]["collisions"], 0,
         "trial {i} ({label} at {at_s} s): {}",

@@ -143,3 +143,23 @@ pub fn python() -> Command {
     );
     Command::new(py)
 }
+
+/// The `summary.json` of a finished run.
+pub fn summary(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+}
+
+/// Asserts that run `run_id` left nothing behind: no file of its shared
+/// memory domain, no process that mentions it.
+pub fn assert_domain_clean(run_id: &str) {
+    let left = shoal_runtime::list_domain_files(run_id);
+    assert!(
+        left.is_empty(),
+        "stale shared memory of run {run_id}: {left:?}"
+    );
+    let procs = processes_mentioning(run_id);
+    assert!(
+        procs.is_empty(),
+        "orphan processes of run {run_id}: {procs:?}"
+    );
+}
