@@ -131,7 +131,11 @@ fn verify(o: &GenOptions) -> Scenario {
     let resolved: Vec<_> = s.vehicles.iter().map(|v| (v.d_a_m, v.d_b_m)).collect();
     assert_eq!(given, resolved, "check keeps the generated D_a/D_b");
     let depth = tree_depth(&s);
-    if o.vehicles >= 4 {
+    // One level below the leader holds three followers at most (the centre
+    // file and one file each side), so from five vehicles on some follower
+    // must lead another. (Four could all follow the leader: `>= 4` here
+    // failed whenever the property test drew n = 4.)
+    if o.vehicles >= 5 {
         assert!(depth >= 2, "followers lead followers");
     }
     assert_parents_in_view(&s);
@@ -268,6 +272,16 @@ fn custom_name_is_used_and_bad_names_refused() {
         ..opts(Shape::V, 5, 0, 4.0)
     };
     assert!(matches!(generate(&o), Err(GenError::Name(_))));
+}
+
+#[test]
+fn four_vehicles_may_all_follow_the_leader_and_still_check() {
+    // The case the property test once drew: every shape passes verify at n = 4.
+    for shape in SHAPES {
+        verify(&opts(shape, 4, 493_105, 3.76));
+    }
+    let s = verify(&opts(Shape::Column, 4, 493_105, 3.76));
+    assert_eq!(tree_depth(&s), 1);
 }
 
 proptest! {
