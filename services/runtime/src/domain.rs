@@ -23,8 +23,20 @@ pub fn domain_prefix(run_id: &str) -> String {
 }
 
 /// The iceoryx2 configuration of a run's domain.
+///
+/// iceoryx2 by default looks for dead nodes whenever a node is created or
+/// dropped and whenever a service is opened. Each look lists every node of
+/// the domain and reads each one's files, so starting N processes that each
+/// open O(1) services costs O(N²): at 100 vehicles (500 processes) that scan
+/// was half the start-up CPU. A shoal run does not need it. The orchestrator
+/// owns every process, reaps each one with `wait4`, and calls
+/// `try_cleanup_dead_nodes` itself when one dies (the restart policy), and
+/// whatever a crashed run leaves is removed by the stale-domain sweep.
 pub fn iceoryx_config(run_id: &str) -> Config {
     let mut config = Config::default();
+    config.global.node.cleanup_dead_nodes_on_creation = false;
+    config.global.node.cleanup_dead_nodes_on_destruction = false;
+    config.global.service.cleanup_dead_nodes_on_open = false;
     if let Ok(prefix) = FileName::new(domain_prefix(run_id).as_bytes()) {
         config.global.prefix = prefix;
     }
