@@ -29,8 +29,10 @@
 //!   orchestrator's;
 //! * **recorder messages/s and drops**: messages in the recording (its
 //!   `shoal.recorder` metadata) per wall second, and the messages it lost;
-//! * **collisions, min pair distance, min parent visible**: from the
-//!   summary, so a fast run that went wrong shows.
+//! * **collisions, min pair distance, min parent visible, max parent
+//!   range**: from the summary, so a fast run that went wrong shows (the
+//!   range is from a follower's camera to its parent, against the camera's
+//!   visibility range).
 //!
 //! Then the cost ratio (CPU per vehicle-second at the largest N that ran
 //! against N = 25; issue 8 asks for ≤ 1.5). It writes `OUT/scale.md` (the
@@ -159,6 +161,10 @@ struct Figures {
     safe_distance_m: Option<f64>,
     /// Least share of the run a follower saw its parent.
     min_parent_visible: Option<f64>,
+    /// Farthest any follower's camera got from its parent, m.
+    max_parent_range_m: Option<f64>,
+    /// The camera's visibility range, m.
+    visibility_range_m: Option<f64>,
 }
 
 impl Figures {
@@ -187,14 +193,17 @@ impl Figures {
                 .filter_map(|(k, v)| v.as_i64().map(|x| (k.clone(), x)))
                 .collect())
         };
-        let min_parent_visible = s
-            .pointer("/perception/leader_visible_fraction")
-            .and_then(Value::as_object)
-            .and_then(|m| {
-                m.values()
-                    .filter_map(Value::as_f64)
-                    .min_by(|a, b| a.total_cmp(b))
-            });
+        let extreme = |p: &str, min: bool| {
+            s.pointer(p).and_then(Value::as_object).and_then(|m| {
+                let values = m.values().filter_map(Value::as_f64);
+                if min {
+                    values.min_by(f64::total_cmp)
+                } else {
+                    values.max_by(f64::total_cmp)
+                }
+            })
+        };
+        let min_parent_visible = extreme("/perception/leader_visible_fraction", true);
         Ok(Self {
             sim_s: num("/sim_time_s")?,
             wall_s: num("/wall_time_s")?,
@@ -210,6 +219,10 @@ impl Figures {
                 .and_then(Value::as_f64),
             safe_distance_m: s.pointer("/safety/safe_distance_m").and_then(Value::as_f64),
             min_parent_visible,
+            max_parent_range_m: extreme("/perception/parent_range_max_m", false),
+            visibility_range_m: s
+                .pointer("/perception/visibility_range_m")
+                .and_then(Value::as_f64),
         })
     }
 
@@ -269,6 +282,8 @@ impl Figures {
             "min_pair_distance_m": self.min_pair_m,
             "safe_distance_m": self.safe_distance_m,
             "min_parent_visible_fraction": self.min_parent_visible,
+            "max_parent_range_m": self.max_parent_range_m,
+            "visibility_range_m": self.visibility_range_m,
         })
     }
 }
@@ -388,7 +403,7 @@ fn one_line(s: &str) -> String {
 }
 
 /// Column headings of the table.
-const HEADINGS: [&str; 13] = [
+const HEADINGS: [&str; 14] = [
     "N",
     "processes",
     "real-time factor",
@@ -401,6 +416,7 @@ const HEADINGS: [&str; 13] = [
     "collisions",
     "min pair m",
     "min parent visible",
+    "max parent range m",
     "note",
 ];
 
@@ -412,7 +428,10 @@ fn cells(r: &Row) -> Vec<String> {
             let note = match (f.min_pair_m, f.safe_distance_m) {
                 _ if f.collisions > 0 || f.recorder_dropped > 0 => "UNHEALTHY".to_string(),
                 (Some(m), Some(safe)) if m < safe => "below safe distance".to_string(),
-                _ => String::new(),
+                _ => match (f.max_parent_range_m, f.visibility_range_m) {
+                    (Some(r), Some(v)) if r > v => "a parent out of visibility range".to_string(),
+                    _ => String::new(),
+                },
             };
             vec![
                 r.vehicles.to_string(),
@@ -428,6 +447,7 @@ fn cells(r: &Row) -> Vec<String> {
                 f.min_pair_m.map_or("-".to_string(), fmt_num),
                 f.min_parent_visible
                     .map_or("-".to_string(), |v| format!("{:.0}%", 100.0 * v)),
+                f.max_parent_range_m.map_or("-".to_string(), fmt_num),
                 note,
             ]
         }
@@ -1090,6 +1110,8 @@ mod tests {
             min_pair_m: Some(3.5),
             safe_distance_m: Some(2.0),
             min_parent_visible: Some(0.97),
+            max_parent_range_m: Some(10.5),
+            visibility_range_m: Some(12.0),
         }
     }
 
@@ -1138,7 +1160,11 @@ mod tests {
             },
             "recording": { "messages": 4000, "dropped": 2 },
             "safety": { "collisions": 0, "min_pair_distance_m": 2.5, "safe_distance_m": 2.0 },
-            "perception": { "leader_visible_fraction": { "F1": 0.9, "F2": 0.75 } },
+            "perception": {
+                "leader_visible_fraction": { "F1": 0.9, "F2": 0.75 },
+                "parent_range_max_m": { "F1": 9.5, "F2": 11.25 },
+                "visibility_range_m": 12.0,
+            },
         });
         // The orchestrator: 12 s cumulative − 10.75 s before − 0.25 s sampler.
         let f = Figures::from_summary(&s, 10.75).unwrap();
@@ -1153,6 +1179,8 @@ mod tests {
         assert_eq!(f.recorder_msgs_per_s(), 500.0);
         assert_eq!(f.recorder_dropped, 2);
         assert_eq!(f.min_parent_visible, Some(0.75));
+        assert_eq!(f.max_parent_range_m, Some(11.25));
+        assert_eq!(f.visibility_range_m, Some(12.0));
         assert_eq!(f.min_pair_m, Some(2.5));
         assert!(Figures::from_summary(&json!({ "sim_time_s": 1.0 }), 0.0).is_err());
     }
@@ -1258,13 +1286,14 @@ mod tests {
         assert_eq!(r25[6], "0.500");
         assert_eq!(r25[7], "100");
         assert_eq!(r25[11], "97%");
-        assert_eq!(r25[12], "");
+        assert_eq!(r25[12], "10.5");
+        assert_eq!(r25[13], "");
         assert!(row("50").contains("UNHEALTHY"), "{t}");
         let r100 = cols(&row("100"));
         assert_eq!(r100.len(), HEADINGS.len(), "{t}");
         assert_eq!(r100[1], "501");
         assert!(
-            r100[12].starts_with("skipped: vehicles: the run needs 502"),
+            r100[13].starts_with("skipped: vehicles: the run needs 502"),
             "{t}"
         );
         // The ratio line: N = 50 (largest that ran) against N = 25.

@@ -105,6 +105,47 @@ pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
 /// The start of the run: no vehicle inside an obstacle, none closer than the
 /// safe distance to another, and every follower's camera sees enough of its
 /// parent's beacons (camera perception only). Errors name the vehicle's key.
+/// Followers of followers this many levels below the leader need the
+/// headway ([`planner::FollowerConfig::headway_s`]) to stay string-stable.
+pub const HEADWAY_DEPTH: usize = 3;
+
+/// What the scenario allows but will probably regret, one line each
+/// (`shoal check` prints them, `shoal run` logs them).
+pub fn advice(s: &Scenario) -> Vec<String> {
+    let mut out = Vec::new();
+    let follower: planner::FollowerConfig = s.section("follower").unwrap_or_default();
+    let depth = tree_depth(s);
+    if depth >= HEADWAY_DEPTH && follower.headway_s == 0.0 {
+        out.push(format!(
+            "the formation is {depth} levels deep and follower.headway_s = 0: each level \
+             passes its parent's tracking error on amplified (string instability); \
+             `headway_s = 1.0` and `yaw_headway_s = 1.0` keep it bounded"
+        ));
+    }
+    out
+}
+
+/// Levels below the leader of the deepest follower (0 with no followers).
+pub fn tree_depth(s: &Scenario) -> usize {
+    let parent: BTreeMap<&str, Option<&str>> = s
+        .vehicles
+        .iter()
+        .map(|v| (v.name.as_str(), v.parent.as_deref()))
+        .collect();
+    let mut deepest = 0;
+    for v in &s.vehicles {
+        let mut depth = 0;
+        let mut cur = v.parent.as_deref();
+        // bounded: a cycle (refused by validate) cannot loop forever
+        while let Some(p) = cur.filter(|_| depth < s.vehicles.len()) {
+            depth += 1;
+            cur = parent.get(p).copied().flatten();
+        }
+        deepest = deepest.max(depth);
+    }
+    deepest
+}
+
 fn check_start(
     s: &Scenario,
     field: &sonar::ObstacleField,

@@ -76,6 +76,10 @@ pub const MARGIN_MAX_VEHICLES: usize = 5;
 pub const GATE_CLEAR_MARGIN_M: f64 = 2.0;
 /// The followers' MPC heading weight, as a multiple of the mpc default.
 pub const YAW_WEIGHT_FACTOR: f64 = 5.0;
+/// `follower.headway_s` and `yaw_headway_s` of a generated scenario, s:
+/// the headway that keeps a deep tree string-stable (see the planner's
+/// `FollowerConfig::headway_s`).
+pub const HEADWAY_S: f64 = 1.0;
 /// How far the walls reach past the outermost file, m.
 pub const WALL_OVERHANG_M: f64 = 6.0;
 /// Mission speed, m/s (the paper's).
@@ -687,6 +691,20 @@ fn render(p: &Plan) -> Result<String, std::fmt::Error> {
         "# Heading process noise of the vision observer, as the paper scenario."
     )?;
     writeln!(t, "yaw_accel_noise_radps2 = 0.002")?;
+    writeln!(
+        t,
+        "# Time headway of the slot and of the heading (planner::FollowerConfig::headway_s): a"
+    )?;
+    writeln!(
+        t,
+        "# follower moving faster than the formation aims a little behind its slot. Without it a"
+    )?;
+    writeln!(
+        t,
+        "# chain of followers of followers amplifies its parents' motion level by level."
+    )?;
+    writeln!(t, "headway_s = {}", num(HEADWAY_S))?;
+    writeln!(t, "yaw_headway_s = {}", num(HEADWAY_S))?;
     writeln!(t)?;
     writeln!(t, "[mpc]")?;
     writeln!(

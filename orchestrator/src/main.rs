@@ -199,6 +199,9 @@ fn run_and_summarize(
     settings: &RunSettings,
 ) -> anyhow::Result<Finished> {
     check::resolve(&mut scenario).context("scenario refused")?;
+    for line in check::advice(&scenario) {
+        tracing::warn!("{line}");
+    }
     if out.join("recording.mcap").exists() {
         anyhow::bail!(
             "{} already holds a recording; choose another --out (nothing was overwritten)",
@@ -348,6 +351,9 @@ fn main() -> ExitCode {
                 s.vehicles.len(),
                 s.processes().len()
             );
+            for line in check::advice(&s) {
+                println!("warning: {line}");
+            }
             for v in s.vehicles.iter().filter(|v| v.parent.is_some()) {
                 println!(
                     "  {:<8} follows {:<8} slot {:?} m  D_a {:.2} m  D_b {:+.2} m",

@@ -171,7 +171,12 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
     let after_max = after.iter().copied().fold(0.0, f64::max);
 
     // Perception: fraction of camera frames with a valid pose; pose error
-    // against the truth at the frame's time.
+    // against the truth at the frame's time; how far each follower's camera
+    // got from its parent (the visibility limit of the perception rule).
+    let camera: camera_pose::CameraConfig = scenario.section("camera").unwrap_or_default();
+    let mount = Vector3::from(camera.mount_position_body_m);
+    let mut range_max: Map<String, Value> = Map::new();
+    let mut beyond: Vec<String> = Vec::new();
     let mut visible: Map<String, Value> = Map::new();
     let mut visible_passage: Map<String, Value> = Map::new();
     let mut fix_rate: Map<String, Value> = Map::new();
@@ -200,6 +205,16 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
             }
         }
         let (tf, tp) = (&tracks[&v.name], &tracks[parent]);
+        let mut far = 0.0f64;
+        for (i, &t) in tf.t.iter().enumerate() {
+            if let Some((pp, _)) = tp.at(t) {
+                far = far.max((pp - (tf.p[i] + tf.q[i] * mount)).norm());
+            }
+        }
+        range_max.insert(v.name.clone(), json!(far));
+        if far > camera.visibility_range_m {
+            beyond.push(v.name.clone());
+        }
         for p in poses.iter().filter(|p| p.valid != 0) {
             let t = p.header.origin_sim_time_ns;
             if let (Some(i), Some(j)) = (tf.before(t), tp.before(t)) {
@@ -297,6 +312,9 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
             "leader_visible_fraction": visible,
             "parent_visible_fraction_in_passage": visible_passage,
             "parent_fix_rate_hz": fix_rate,
+            "visibility_range_m": camera.visibility_range_m,
+            "parent_range_max_m": range_max,
+            "beyond_visibility": beyond,
             "pose_error_m": { "p50": pct(&pose_err, 0.5), "p95": pct(&pose_err, 0.95) },
         },
         "mission": { "leader_goal_error_m": finite(goal_err) },
