@@ -4,11 +4,21 @@
 
 use hdrhistogram::Histogram;
 
-/// A histogram of latencies in nanoseconds (1 ns to 60 s, 3 significant digits).
+/// A histogram of latencies in nanoseconds (1 ns to 60 s, 2 significant digits: a
+/// value is kept to within 1 %).
+///
+/// Why 2 and not 3: every process reports its percentiles once per simulated
+/// second, and a percentile is a walk over the buckets up to it. With 3
+/// digits a bucket span holds 1024 counters, with 2 it holds 128; at 100
+/// vehicles (500 processes) those walks were ~7 % of the run's CPU
+/// (`perf`: `HistogramIterator::next`), and are now under 1 %.
 #[derive(Debug, Clone)]
 pub struct LatencyRecorder {
     hist: Option<Histogram<u64>>,
 }
+
+/// Significant decimal digits the histogram keeps.
+pub const SIGNIFICANT_DIGITS: u8 = 2;
 
 impl Default for LatencyRecorder {
     fn default() -> Self {
@@ -35,7 +45,7 @@ impl LatencyRecorder {
     /// An empty recorder.
     pub fn new() -> Self {
         Self {
-            hist: Histogram::new_with_bounds(1, 60_000_000_000, 3).ok(),
+            hist: Histogram::new_with_bounds(1, 60_000_000_000, SIGNIFICANT_DIGITS).ok(),
         }
     }
 
