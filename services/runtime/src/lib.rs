@@ -382,7 +382,9 @@ impl Runtime {
             &clock_limits,
             2,
             Mode::Realtime, // the clock itself is never held back
-        )?;
+        )?
+        // a process due every k-th tick reads the latest tick only
+        .latest_only();
         let done = self.done_notifier()?;
         // Ready: every port of this process exists, so the first tick's samples reach it.
         self.notify_ready(&done)?;

@@ -287,6 +287,9 @@ pub struct Subscriber<T: Sample> {
     /// Next expected sequence number of each publisher (a service may have
     /// several: the stats channel, a restarted process).
     next_seq: Vec<(u128, u64)>,
+    /// False for a channel read for its latest sample only (the clock): the
+    /// samples its small buffer overwrote are skipped by design, not lost.
+    count_gaps: bool,
     lost: u64,
     rejected: u64,
     hops: Rc<RefCell<HopEntry>>,
@@ -315,6 +318,7 @@ impl<T: Sample> Subscriber<T> {
             mode,
             held: VecDeque::with_capacity(2 * limits.max_buffer),
             next_seq: Vec::new(),
+            count_gaps: true,
             lost: 0,
             rejected: 0,
             hops: hop_entry(channel_kind(service)),
@@ -324,6 +328,13 @@ impl<T: Sample> Subscriber<T> {
     /// The service name.
     pub fn service(&self) -> &str {
         &self.service
+    }
+
+    /// Reads only the latest sample: gaps in the sequence are not counted
+    /// as lost (see [`Subscriber::lost`]).
+    pub fn latest_only(mut self) -> Self {
+        self.count_gaps = false;
+        self
     }
 
     /// Samples that never arrived (gaps in the publisher's sequence).
@@ -373,7 +384,7 @@ impl<T: Sample> Subscriber<T> {
                     .record_ns(taken.saturating_sub(h.publish_mono_ns));
                 match self.next_seq.iter_mut().find(|(p, _)| *p == publisher) {
                     Some((_, n)) => {
-                        if h.seq > *n {
+                        if h.seq > *n && self.count_gaps {
                             self.lost += h.seq - *n;
                             hops.lost += h.seq - *n;
                         }
