@@ -116,10 +116,11 @@ pub fn advice(s: &Scenario) -> Vec<String> {
     let follower: planner::FollowerConfig = s.section("follower").unwrap_or_default();
     let depth = tree_depth(s);
     if depth >= HEADWAY_DEPTH && follower.headway_s == 0.0 {
+        let (h, h_yaw) = (crate::gen::HEADWAY_S, crate::gen::YAW_HEADWAY_S);
         out.push(format!(
             "the formation is {depth} levels deep and follower.headway_s = 0: each level \
              passes its parent's tracking error on amplified (string instability); \
-             `headway_s = 1.0` and `yaw_headway_s = 1.0` keep it bounded"
+             set `headway_s` and `yaw_headway_s` (`shoal gen` writes {h} and {h_yaw} s)"
         ));
     }
     out
@@ -631,6 +632,32 @@ mod tests {
     const PAPER_SHM_FILES: u64 = 258;
     const PAPER_SHM_BYTES: u64 = 4_014_828;
     const PAPER_RECORDER_FILES: u64 = 307;
+
+    #[test]
+    fn a_deep_tree_without_headway_is_warned_about_and_the_paper_is_not() {
+        let paper = Scenario::paper().unwrap();
+        assert_eq!(tree_depth(&paper), 2);
+        assert!(advice(&paper).is_empty());
+        // L <- F1 <- F2 <- F3: three levels
+        let chain = |extra: &str| {
+            let mut text = String::from("name = \"chain\"\nduration_s = 10.0\n");
+            text.push_str(extra);
+            text.push_str("[[vehicles]]\nname = \"L\"\n");
+            for (i, parent) in ["L", "F1", "F2"].iter().enumerate() {
+                text.push_str(&format!(
+                    "[[vehicles]]\nname = \"F{}\"\nparent = \"{parent}\"\nslot_m = [-6.0, 0.0, 0.0]\n",
+                    i + 1
+                ));
+            }
+            Scenario::from_toml(&text).unwrap()
+        };
+        let bare = chain("");
+        assert_eq!(tree_depth(&bare), 3);
+        let said = advice(&bare);
+        assert_eq!(said.len(), 1, "{said:?}");
+        assert!(said[0].contains("3 levels deep"), "{said:?}");
+        assert!(advice(&chain("[follower]\nheadway_s = 1.0\n")).is_empty());
+    }
 
     #[test]
     fn paper_needs_match_a_measured_run_and_err_high() {

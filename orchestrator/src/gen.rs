@@ -76,10 +76,20 @@ pub const MARGIN_MAX_VEHICLES: usize = 5;
 pub const GATE_CLEAR_MARGIN_M: f64 = 2.0;
 /// The followers' MPC heading weight, as a multiple of the mpc default.
 pub const YAW_WEIGHT_FACTOR: f64 = 5.0;
-/// `follower.headway_s` and `yaw_headway_s` of a generated scenario, s:
-/// the headway that keeps a deep tree string-stable (see the planner's
-/// `FollowerConfig::headway_s`).
+/// `follower.headway_s` of a generated scenario, s: the headway that keeps
+/// a deep tree string-stable (see the planner's `FollowerConfig::headway_s`).
 pub const HEADWAY_S: f64 = 1.0;
+/// `follower.yaw_headway_s` of a generated scenario, s.
+pub const YAW_HEADWAY_S: f64 = 3.0;
+/// `follower.headway_avg_s` of a generated scenario, s: longer than the
+/// planner's default, so that the start-up acceleration (20 s) is not where
+/// the headway's slow average lets the gain per level exceed 1.
+///
+/// Measured on 100 vehicles against `yaw_headway_s = 1`, `headway_avg_s =
+/// 20`: the V (14 levels) lost no parent instead of six in the start-up, the
+/// grid's closest approach to a wall went from 0.34 m to 1.54 m, the
+/// triangle kept 0 collisions with every camera within 10.8 m of its parent.
+pub const HEADWAY_AVG_S: f64 = 60.0;
 /// How far the walls reach past the outermost file, m.
 pub const WALL_OVERHANG_M: f64 = 6.0;
 /// Mission speed, m/s (the paper's).
@@ -704,7 +714,8 @@ fn render(p: &Plan) -> Result<String, std::fmt::Error> {
         "# chain of followers of followers amplifies its parents' motion level by level."
     )?;
     writeln!(t, "headway_s = {}", num(HEADWAY_S))?;
-    writeln!(t, "yaw_headway_s = {}", num(HEADWAY_S))?;
+    writeln!(t, "yaw_headway_s = {}", num(YAW_HEADWAY_S))?;
+    writeln!(t, "headway_avg_s = {}", num(HEADWAY_AVG_S))?;
     writeln!(t)?;
     writeln!(t, "[mpc]")?;
     writeln!(
