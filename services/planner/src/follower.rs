@@ -88,8 +88,9 @@ pub struct FollowerConfig {
     ///
     /// The price: while the formation speeds up, each follower trails its slot by
     /// `h·(v − v̄)` (at the paper's 0.05 m/s² start, up to ~1 m). The paper's scenario,
-    /// two levels deep, does not need it and keeps the default; `shoal gen` sets 1 s, and
-    /// `shoal check` warns about a deeper tree without it.
+    /// two levels deep, does not need it and keeps the default; `shoal gen` sets 1 s (with
+    /// `yaw_headway_s = 3`, `headway_avg_s = 60`), and `shoal check` warns about a deeper
+    /// tree without it.
     pub headway_s: f64,
     /// Averaging time constant of `v̄` in `headway_s` and of `r̄` in `yaw_headway_s`, s
     /// (default 20).
