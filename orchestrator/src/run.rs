@@ -279,6 +279,16 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
             *m = (*m).max(e.max_rss_kib);
         }
     }
+    // A process's own peak (its exit file) where it wrote one: wait4's counts
+    // the orchestrator's pages a child holds between fork and exec.
+    let mut own_peak: BTreeMap<String, i64> = BTreeMap::new();
+    for f in &stats {
+        if let Some(k) = f.peak_rss_kib.and_then(|k| i64::try_from(k).ok()) {
+            let m = own_peak.entry(f.process.clone()).or_default();
+            *m = (*m).max(k);
+        }
+    }
+    max_rss_kib.extend(own_peak);
     cpu_time_s.insert("orchestrator".into(), sys::self_cpu_s());
     let failed: Vec<String> = sup
         .latest()

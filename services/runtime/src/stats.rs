@@ -48,6 +48,20 @@ pub struct StatsFile {
     pub wake_late_ns: Vec<(u64, u64)>,
     /// Every input channel kind.
     pub hops: Vec<HopFile>,
+    /// The process's own peak resident memory (`VmHWM`), KiB, read at exit.
+    /// Unlike `wait4`'s `ru_maxrss`, it does not count the parent's pages the
+    /// child held between fork and exec.
+    #[serde(default)]
+    pub peak_rss_kib: Option<u64>,
+}
+
+/// This process's peak resident memory, KiB (`VmHWM` of `/proc/self/status`).
+pub fn own_peak_rss_kib() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
 }
 
 /// Where a run's processes leave their statistics files.
@@ -189,6 +203,7 @@ impl StatsReporter {
                     latency_ns: h.latency.buckets(),
                 })
                 .collect(),
+            peak_rss_kib: own_peak_rss_kib(),
         };
         let dir = stats_dir(&self.run_id);
         std::fs::create_dir_all(&dir)?;
@@ -206,4 +221,33 @@ fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let tmp = path.with_extension("json.tmp");
     std::fs::write(&tmp, bytes)?;
     std::fs::rename(&tmp, path)
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+
+    #[test]
+    fn own_peak_rss_counts_memory_this_process_touched() {
+        let before = own_peak_rss_kib().expect("VmHWM in /proc/self/status");
+        assert!(before > 0);
+        // touch 64 MiB more than the process ever held: the peak must rise by most of it
+        let block = vec![1u8; 64 << 20];
+        let after = own_peak_rss_kib().unwrap();
+        assert!(
+            after >= before + (48 << 10),
+            "{before} KiB -> {after} KiB with {} MiB touched",
+            block.iter().map(|&b| usize::from(b)).sum::<usize>() >> 20
+        );
+    }
+
+    #[test]
+    fn an_exit_file_without_the_peak_still_reads() {
+        let old = r#"{"vehicle":"F1","process":"mpc","steps":3,"deadline_misses":0,
+                      "step_ns":[[1000,3]],"wake_late_ns":[],"hops":[]}"#;
+        let f: StatsFile = serde_json::from_str(old).unwrap();
+        assert_eq!(f.peak_rss_kib, None);
+        assert_eq!(f.steps, 3);
+    }
 }
