@@ -97,6 +97,21 @@ fn a_generated_group_of_100_runs_to_the_end_safe_and_every_parent_in_sight() {
     let clearance = num("/safety/min_obstacle_clearance_m");
     assert!(clearance > 1.0, "min clearance {clearance} m");
 
+    // string stability: the slot error does not grow down the tree (without
+    // the headway it grew ~1.8x per level, to metres at level 9)
+    let by_level = s["formation"]["slot_error_rms_m_by_level"]
+        .as_object()
+        .unwrap();
+    assert_eq!(by_level.len(), deepest, "{by_level:?}");
+    let first = by_level["1"].as_f64().unwrap();
+    for (level, rms) in by_level {
+        let rms = rms.as_f64().unwrap();
+        assert!(
+            rms <= (2.0 * first).max(0.5) && rms < 1.5,
+            "level {level}: slot error {rms} m RMS, level 1: {first} m ({by_level:?})"
+        );
+    }
+
     // every follower within its camera's visibility range of its parent,
     // all the way, and seeing it
     let range = num("/perception/visibility_range_m");

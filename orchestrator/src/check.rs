@@ -128,23 +128,7 @@ pub fn advice(s: &Scenario) -> Vec<String> {
 
 /// Levels below the leader of the deepest follower (0 with no followers).
 pub fn tree_depth(s: &Scenario) -> usize {
-    let parent: BTreeMap<&str, Option<&str>> = s
-        .vehicles
-        .iter()
-        .map(|v| (v.name.as_str(), v.parent.as_deref()))
-        .collect();
-    let mut deepest = 0;
-    for v in &s.vehicles {
-        let mut depth = 0;
-        let mut cur = v.parent.as_deref();
-        // bounded: a cycle (refused by validate) cannot loop forever
-        while let Some(p) = cur.filter(|_| depth < s.vehicles.len()) {
-            depth += 1;
-            cur = parent.get(p).copied().flatten();
-        }
-        deepest = deepest.max(depth);
-    }
-    deepest
+    s.levels().into_values().max().unwrap_or(0)
 }
 
 fn check_start(

@@ -147,6 +147,9 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
     let mut during = Vec::new();
     let mut after = Vec::new();
     let mut per_follower: Map<String, Value> = Map::new();
+    // by level in the tree: how a tracking error grows from parent to child
+    let levels = scenario.levels();
+    let mut by_level: BTreeMap<usize, Vec<f64>> = BTreeMap::new();
     for v in scenario.vehicles.iter() {
         let (Some(parent), Some(slot)) = (&v.parent, v.slot_m) else {
             continue;
@@ -167,7 +170,15 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
             }
         }
         per_follower.insert(v.name.clone(), json!({ "rms": rms(&errs) }));
+        by_level
+            .entry(levels.get(&v.name).copied().unwrap_or(0))
+            .or_default()
+            .extend(errs);
     }
+    let by_level: Map<String, Value> = by_level
+        .iter()
+        .map(|(level, errs)| (level.to_string(), json!(rms(errs))))
+        .collect();
     let after_max = after.iter().copied().fold(0.0, f64::max);
 
     // Perception: fraction of camera frames with a valid pose; pose error
@@ -306,6 +317,7 @@ pub fn summarize(scenario: &Scenario, rec: &Recording, outcome: &RunOutcome, mod
             "slot_error_rms_m": { "before": rms(&before), "during": rms(&during), "after": rms(&after) },
             "slot_error_max_after_m": after_max,
             "slot_error_rms_m_by_follower": per_follower,
+            "slot_error_rms_m_by_level": by_level,
             "passage_s": if avoid_first == u64::MAX { Value::Null } else { json!([avoid_first as f64 * 1e-9, avoid_last as f64 * 1e-9]) },
         },
         "perception": {

@@ -778,6 +778,29 @@ impl Scenario {
         }
     }
 
+    /// Each vehicle's level in the formation tree: 0 for the leader, one
+    /// more than its parent's for a follower (a parent that is missing, or a
+    /// cycle, which `validate` refuses, stops the count).
+    pub fn levels(&self) -> BTreeMap<String, usize> {
+        let parent: HashMap<&str, Option<&str>> = self
+            .vehicles
+            .iter()
+            .map(|v| (v.name.as_str(), v.parent.as_deref()))
+            .collect();
+        self.vehicles
+            .iter()
+            .map(|v| {
+                let mut level = 0;
+                let mut cur = v.parent.as_deref();
+                while let Some(p) = cur.filter(|_| level < self.vehicles.len()) {
+                    level += 1;
+                    cur = parent.get(p).copied().flatten();
+                }
+                (v.name.clone(), level)
+            })
+            .collect()
+    }
+
     /// Every process of the run in a fixed order: world, recorder, then per
     /// vehicle sim-plant, camera-pose (followers only), sonar, planner, mpc.
     pub fn processes(&self) -> Vec<ProcessSpec> {
@@ -999,6 +1022,16 @@ name = "F3"
 parent = "F1"
 slot_m = [-8.0, -4.0, 0.0]
 "#;
+
+    #[test]
+    fn levels_count_the_parents_up_to_the_leader() {
+        let s = Scenario::from_toml(BASE).unwrap();
+        let levels = s.levels();
+        assert_eq!(levels["L"], 0);
+        assert_eq!(levels["F1"], 1);
+        assert_eq!(levels["F3"], 2);
+        assert_eq!(levels.len(), 3);
+    }
 
     fn err_of(text: &str) -> String {
         Scenario::from_toml(text).unwrap_err().to_string()
