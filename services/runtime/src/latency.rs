@@ -11,7 +11,7 @@ use hdrhistogram::Histogram;
 /// second, and a percentile is a walk over the buckets up to it. With 3
 /// digits a bucket span holds 1024 counters, with 2 it holds 128; at 100
 /// vehicles (500 processes) those walks were ~7 % of the run's CPU
-/// (`perf`: `HistogramIterator::next`), and are now under 1 %.
+/// (`perf`: `HistogramIterator::next`); 2 digits walk 8× fewer counters.
 #[derive(Debug, Clone)]
 pub struct LatencyRecorder {
     hist: Option<Histogram<u64>>,
