@@ -266,10 +266,9 @@ struct SlotState {
     filter: SlotFilter,
     last_shift: Shift,
     anchor: Option<Anchor>,
-    /// `v̄` of the headway: the target's velocity in the parent's level frame, averaged.
-    mean_velocity: Option<Vector3<f64>>,
-    /// `r̄` of the heading's headway: the parent's turn rate, averaged.
-    mean_yaw_rate: Option<f64>,
+    /// The headway's averages: `v̄`, the target's velocity in the parent's level frame, and
+    /// `r̄`, the parent's turn rate.
+    headway_mean: Option<(Vector3<f64>, f64)>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -365,8 +364,7 @@ impl FollowerPlanner {
                     active: false,
                 },
                 anchor: None,
-                mean_velocity: None,
-                mean_yaw_rate: None,
+                headway_mean: None,
             }),
             mount: Vector3::from(cfg.sonar_mount_body_m),
             observer: Box::new(ParentObserver::new(ObserverParams {
@@ -620,8 +618,7 @@ impl FollowerPlanner {
                 if self.mode == Mode::ParentLost {
                     // re-entering: restart the slot filter from the current shift
                     self.slot.filter.reset(self.slot.last_shift.slot);
-                    self.slot.mean_velocity = None;
-                    self.slot.mean_yaw_rate = None;
+                    self.slot.headway_mean = None;
                 }
                 self.slot.anchor = None;
                 self.track(dt, &v_own, input.nu[5])
@@ -774,18 +771,14 @@ impl FollowerPlanner {
             v_parent + Vector3::z().cross(&arm) * r_parent + from_level(yaw_parent, &slot_rate);
         // headway: v̄ is kept in the parent's level frame, so that a steady turn is steady
         let v_level = to_level(yaw_parent, &vel);
-        let mean = self.slot.mean_velocity.map_or(v_level, |m| {
-            m + (v_level - m) * (dt / self.cfg.headway_avg_s).min(1.0)
-        });
-        self.slot.mean_velocity = Some(mean);
-        let headway = (v_own - from_level(yaw_parent, &mean)) * self.cfg.headway_s;
+        let gain = (dt / self.cfg.headway_avg_s).min(1.0);
+        let (mean_v, mean_r) = match self.slot.headway_mean {
+            Some((v, r)) => (v + (v_level - v) * gain, r + (r_parent - r) * gain),
+            None => (v_level, r_parent),
+        };
+        self.slot.headway_mean = Some((mean_v, mean_r));
+        let headway = (v_own - from_level(yaw_parent, &mean_v)) * self.cfg.headway_s;
         let pos = p_parent + arm - headway;
-        let avg = (dt / self.cfg.headway_avg_s).min(1.0);
-        let mean_r = self
-            .slot
-            .mean_yaw_rate
-            .map_or(r_parent, |m| m + (r_parent - m) * avg);
-        self.slot.mean_yaw_rate = Some(mean_r);
         let yaw = wrap(yaw_parent - self.cfg.yaw_headway_s * (r_own - mean_r));
         self.last_target_odo = Some((pos, vel, yaw));
         let returning = (filtered - self.slot.disp.slot).norm() > 0.05;
