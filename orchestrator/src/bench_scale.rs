@@ -551,13 +551,8 @@ struct MemReading {
 
 /// Reads `VmHWM` and `RssAnon` out of a `/proc/PID/status` text.
 fn parse_status(text: &str) -> Option<MemReading> {
-    let field = |name: &str| -> Option<i64> {
-        text.lines()
-            .find_map(|l| l.strip_prefix(name))?
-            .split_whitespace()
-            .next()?
-            .parse()
-            .ok()
+    let field = |name: &str| {
+        shoal_runtime::stats::proc_status_kib(text, name).and_then(|k| i64::try_from(k).ok())
     };
     Some(MemReading {
         hwm_kib: field("VmHWM:")?,

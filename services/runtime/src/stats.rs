@@ -55,13 +55,22 @@ pub struct StatsFile {
     pub peak_rss_kib: Option<u64>,
 }
 
+/// A memory field (`VmHWM:`, `RssAnon:`, …) of a `/proc/PID/status` text, KiB.
+pub fn proc_status_kib(text: &str, field: &str) -> Option<u64> {
+    text.lines()
+        .find_map(|l| l.strip_prefix(field))?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
+}
+
 /// This process's peak resident memory, KiB (`VmHWM` of `/proc/self/status`).
 pub fn own_peak_rss_kib() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmHWM:"))
-        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+    proc_status_kib(
+        &std::fs::read_to_string("/proc/self/status").ok()?,
+        "VmHWM:",
+    )
 }
 
 /// Where a run's processes leave their statistics files.
