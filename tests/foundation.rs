@@ -98,15 +98,7 @@ fn paper_run_records_every_channel_and_the_official_readers_decode_it() {
     // The summary reports CPU time per process kind (no process busy-polls:
     // the whole run's CPU is a small multiple of its wall time on 2 cores).
     let s = summary(&out);
-    for kind in [
-        "sim-plant",
-        "camera-pose",
-        "sonar",
-        "planner",
-        "mpc",
-        "world",
-        "recorder",
-    ] {
+    for kind in PROCESS_KINDS {
         assert!(
             s["cpu_time_s"][kind].as_f64().is_some(),
             "cpu_time_s.{kind} missing: {s}"

@@ -107,15 +107,7 @@ fn a_realtime_run_reports_deadlines_steps_and_every_hop() {
     let s: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(s["mode"], "realtime");
-    for kind in [
-        "sim-plant",
-        "world",
-        "camera-pose",
-        "sonar",
-        "planner",
-        "mpc",
-        "recorder",
-    ] {
+    for kind in PROCESS_KINDS {
         assert!(
             s["deadline_misses"][kind].is_u64(),
             "no deadline misses for {kind}: {}",

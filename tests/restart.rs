@@ -11,16 +11,6 @@ use std::time::Duration;
 use recordings::Recording;
 use shoal_tests::*;
 
-/// Every kind of process of a run, as `[[faults]]` names them.
-const KINDS: [&str; 7] = [
-    "sim-plant",
-    "camera-pose",
-    "sonar",
-    "planner",
-    "mpc",
-    "world",
-    "recorder",
-];
 const VEHICLES: [&str; 5] = ["L", "F1", "F2", "F3", "F4"];
 /// Simulated seconds per trial: the whole passage (the leader is through it
 /// at about 90 s) and the formation closing up behind it.
@@ -36,7 +26,7 @@ fn mix(mut z: u64) -> u64 {
 
 /// Trial `i`: which process dies and when.
 fn trial_fault(i: u64) -> (String, &'static str, f64) {
-    let kind = KINDS[(i % KINDS.len() as u64) as usize];
+    let kind = PROCESS_KINDS[(i % PROCESS_KINDS.len() as u64) as usize];
     // The world and the recorder are the run's; the leader has no camera.
     let vehicles: &[&str] = match kind {
         "world" | "recorder" => &["run"],

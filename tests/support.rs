@@ -27,6 +27,19 @@ pub fn bin_dir() -> PathBuf {
     dir
 }
 
+/// Every kind of process of a run, as `summary.json` and `[[faults]]` name
+/// them (written out here, not taken from the scenario crate, so a kind that
+/// went missing there fails the tests).
+pub const PROCESS_KINDS: [&str; 7] = [
+    "sim-plant",
+    "camera-pose",
+    "sonar",
+    "planner",
+    "mpc",
+    "world",
+    "recorder",
+];
+
 /// A `shoal` command.
 pub fn shoal() -> Command {
     Command::new(bin_dir().join("shoal"))
