@@ -726,15 +726,7 @@ fn run_one(
     settings: &RunSettings,
     plots: bool,
 ) -> anyhow::Result<Figures> {
-    let opts = run::RunOptions {
-        scenario: scenario.clone(),
-        out: dir.to_path_buf(),
-        mode: settings.mode,
-        bin_dir: settings.bin_dir.clone(),
-        progress: settings.progress,
-        tick_timeout: settings.tick_timeout,
-        spin_us: settings.spin_us,
-    };
+    let opts = settings.options(scenario, dir);
     let peak_reset = reset_own_peak_rss();
     let cpu_before = sys::self_cpu_s();
     let sampler = MemSampler::start()?;

@@ -179,6 +179,19 @@ impl RunSettings {
             spin_us: 0,
         })
     }
+
+    /// The options of a run of `scenario` (resolved) into `out`.
+    fn options(&self, scenario: &Scenario, out: &std::path::Path) -> run::RunOptions {
+        run::RunOptions {
+            scenario: scenario.clone(),
+            out: out.to_path_buf(),
+            mode: self.mode,
+            bin_dir: self.bin_dir.clone(),
+            progress: self.progress,
+            tick_timeout: self.tick_timeout,
+            spin_us: self.spin_us,
+        }
+    }
 }
 
 /// A finished, summarised run.
@@ -208,16 +221,7 @@ fn run_and_summarize(
             out.display()
         );
     }
-    let opts = run::RunOptions {
-        scenario: scenario.clone(),
-        out: out.to_path_buf(),
-        mode: settings.mode,
-        bin_dir: settings.bin_dir.clone(),
-        progress: settings.progress,
-        tick_timeout: settings.tick_timeout,
-        spin_us: settings.spin_us,
-    };
-    let outcome = run::run(&opts)?;
+    let outcome = run::run(&settings.options(&scenario, out))?;
     let rec = recordings::Recording::open(&outcome.recording)?;
     let summary = summary::summarize(&scenario, &rec, &outcome, settings.mode.as_str());
     let path = out.join("summary.json");
