@@ -25,7 +25,7 @@ use anyhow::Context;
 use serde_json::{json, Value};
 use shoal_runtime::Mode;
 
-use crate::{load_scenario, run_and_summarize, sys, RunSettings};
+use crate::{load_scenario, run_and_summarize, sys, ProcessArgs, RunSettings};
 
 /// Issue 7: the paper scenario in lockstep at ≥ 50× real time.
 const GOAL_RTF: f64 = 50.0;
@@ -62,12 +62,8 @@ pub struct RunBenchCmd {
     /// realtime sections of summary.json) as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Directory holding the service binaries (default: next to `shoal`).
-    #[arg(long)]
-    pub bin_dir: Option<PathBuf>,
-    /// Longest a lockstep tick may take before a run is declared hung, s.
-    #[arg(long, default_value_t = 30.0)]
-    pub tick_timeout: f64,
+    #[command(flatten)]
+    pub processes: ProcessArgs,
 }
 
 /// The figures of one lockstep run.
@@ -398,8 +394,7 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
     // Alternate the variants so a drift in the machine's load hits both.
     for i in 0..cmd.repeat {
         for (vi, v) in variants.iter_mut().enumerate() {
-            let mut settings =
-                RunSettings::new(Mode::Lockstep, cmd.bin_dir.clone(), true, cmd.tick_timeout)?;
+            let mut settings = cmd.processes.settings(Mode::Lockstep, true)?;
             settings.spin_us = v.spin_us;
             let out = scratch.path.join(format!(
                 "lockstep-{}-{}",
@@ -429,8 +424,7 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
             "  realtime: {} s on the wall clock ...",
             fmt_num(rt.duration_s)
         );
-        let settings =
-            RunSettings::new(Mode::Realtime, cmd.bin_dir.clone(), true, cmd.tick_timeout)?;
+        let settings = cmd.processes.settings(Mode::Realtime, true)?;
         let (summary, _) = one_run(&rt, &scratch.path.join("realtime"), &settings)?;
         Some(summary)
     } else {

@@ -103,12 +103,8 @@ pub struct ScaleCmd {
     /// groups: the pair-distance figure has N(N−1)/2 curves).
     #[arg(long)]
     pub plots: bool,
-    /// Directory holding the service binaries (default: next to `shoal`).
-    #[arg(long)]
-    pub bin_dir: Option<PathBuf>,
-    /// Longest a lockstep tick may take before a run is declared hung, s.
-    #[arg(long, default_value_t = 30.0)]
-    pub tick_timeout: f64,
+    #[command(flatten)]
+    pub processes: crate::ProcessArgs,
 }
 
 fn parse_vehicles(s: &str) -> Result<usize, String> {
@@ -799,7 +795,7 @@ pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
         }
     }
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let settings = RunSettings::new(Mode::Lockstep, cmd.bin_dir.clone(), false, cmd.tick_timeout)?;
+    let settings = cmd.processes.settings(Mode::Lockstep, false)?;
     let started = Instant::now();
     let load_before = crate::sys::load_average();
     let mut rows: Vec<Row> = Vec::with_capacity(sizes.len());

@@ -99,12 +99,8 @@ struct RunCmd {
     /// Simulated duration in seconds (overrides the scenario's).
     #[arg(long)]
     duration: Option<f64>,
-    /// Directory holding the service binaries (default: next to `shoal`).
-    #[arg(long)]
-    bin_dir: Option<PathBuf>,
-    /// Longest a lockstep tick may take before the run is declared hung, s.
-    #[arg(long, default_value_t = 30.0)]
-    tick_timeout: f64,
+    #[command(flatten)]
+    processes: ProcessArgs,
     /// No progress bar and no closing table.
     #[arg(long, short)]
     quiet: bool,
@@ -161,6 +157,25 @@ struct RunSettings {
     progress: bool,
     tick_timeout: Duration,
     spin_us: u64,
+}
+
+/// Where the service binaries are and how long a tick may take: the options
+/// of every command that runs scenarios with the full set of processes.
+#[derive(Debug, Clone, clap::Args)]
+pub(crate) struct ProcessArgs {
+    /// Directory holding the service binaries (default: next to `shoal`).
+    #[arg(long)]
+    pub bin_dir: Option<PathBuf>,
+    /// Longest a lockstep tick may take before a run is declared hung, s.
+    #[arg(long, default_value_t = 30.0)]
+    pub tick_timeout: f64,
+}
+
+impl ProcessArgs {
+    /// The settings of runs in `mode`, with a progress bar unless `quiet`.
+    fn settings(&self, mode: Mode, quiet: bool) -> anyhow::Result<RunSettings> {
+        RunSettings::new(mode, self.bin_dir.clone(), quiet, self.tick_timeout)
+    }
 }
 
 impl RunSettings {
@@ -247,7 +262,7 @@ fn cmd_run(cmd: RunCmd) -> anyhow::Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| run::default_out(&scenario));
-    let mut settings = RunSettings::new(cmd.mode, cmd.bin_dir, cmd.quiet, cmd.tick_timeout)?;
+    let mut settings = cmd.processes.settings(cmd.mode, cmd.quiet)?;
     settings.spin_us = cmd.spin_us;
     let summary = run_and_summarize(scenario, &out, &settings)?.summary;
     if !cmd.quiet {
