@@ -189,8 +189,9 @@ fn lockstep_rows(variant: &Variant, kinds: &BTreeSet<String>) -> Vec<(String, Ve
     rows
 }
 
-fn fmt_num(x: f64) -> String {
-    if x.is_nan() {
+/// A figure as printed: three significant digits, `-` for NaN or infinity.
+pub(crate) fn fmt_num(x: f64) -> String {
+    if !x.is_finite() {
         "-".to_string()
     } else if x.abs() >= 100.0 {
         format!("{x:.0}")

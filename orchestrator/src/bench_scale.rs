@@ -55,6 +55,7 @@ use serde_json::{json, Value};
 use shoal_runtime::Mode;
 use shoal_scenario::Scenario;
 
+use crate::bench_run::fmt_num;
 use crate::gen::{self, GenOptions, Shape};
 use crate::{check, plots, run, summary, sys, RunSettings};
 
@@ -369,21 +370,6 @@ fn cost_ratio(rows: &[Row]) -> Option<(usize, f64)> {
         .filter_map(|r| r.cost().map(|c| (r.vehicles, c)))
         .max_by_key(|(n, _)| *n)?;
     (n != REFERENCE_N && reference > 0.0).then(|| (n, cost / reference))
-}
-
-/// A figure as printed: three significant digits, `-` for NaN.
-fn fmt_num(x: f64) -> String {
-    if !x.is_finite() {
-        "-".to_string()
-    } else if x.abs() >= 100.0 {
-        format!("{x:.0}")
-    } else if x.abs() >= 10.0 {
-        format!("{x:.1}")
-    } else if x.abs() >= 1.0 {
-        format!("{x:.2}")
-    } else {
-        format!("{x:.3}")
-    }
 }
 
 /// First line of an error, for a table cell.
