@@ -102,9 +102,6 @@ pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The start of the run: no vehicle inside an obstacle, none closer than the
-/// safe distance to another, and every follower's camera sees enough of its
-/// parent's beacons (camera perception only). Errors name the vehicle's key.
 /// Followers of followers this many levels below the leader need the
 /// headway ([`planner::FollowerConfig::headway_s`]) to stay string-stable.
 pub const HEADWAY_DEPTH: usize = 3;
@@ -131,6 +128,9 @@ pub fn tree_depth(s: &Scenario) -> usize {
     s.levels().into_values().max().unwrap_or(0)
 }
 
+/// The start of the run: no vehicle inside an obstacle, none closer than the
+/// safe distance to another, and every follower's camera sees enough of its
+/// parent's beacons (camera perception only). Errors name the vehicle's key.
 fn check_start(
     s: &Scenario,
     field: &sonar::ObstacleField,
