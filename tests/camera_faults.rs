@@ -48,11 +48,9 @@ fn run(
         "{name}: {}",
         String::from_utf8_lossy(&o.stderr)
     );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     (
         Recording::open(&out.join("recording.mcap")).unwrap(),
-        summary,
+        summary(&out),
     )
 }
 

@@ -121,8 +121,7 @@ fn a_stalled_process_holds_the_lockstep_clock_and_the_run_goes_on() {
         start.elapsed() >= Duration::from_millis(1500),
         "the stall did not hold the clock"
     );
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s = summary(&out);
     let events = s["events"].as_array().unwrap();
     assert_eq!(events.len(), 1, "{events:?}");
     assert_eq!(events[0]["action"], "stall");
@@ -169,10 +168,7 @@ fn a_killed_process_under_the_abort_policy_stops_the_run_cleanly_with_the_cause(
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("F3/sonar") && err.contains("SIGKILL"), "{err}");
-    let run_id = serde_json::from_str::<serde_json::Value>(
-        &std::fs::read_to_string(out.join("run.json")).unwrap(),
-    )
-    .unwrap()["run_id"]
+    let run_id = wait_run_json(&out, Duration::ZERO)["run_id"]
         .as_str()
         .unwrap()
         .to_string();

@@ -23,9 +23,7 @@ fn paper_scenario_is_safe_and_the_formation_returns_for_seeds_0_to_10() {
             "seed {seed}: {}",
             String::from_utf8_lossy(&o.stderr)
         );
-        let s: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
-                .unwrap();
+        let s = summary(&out);
         let f = |p: &str| {
             s.pointer(p)
                 .and_then(|v| v.as_f64())

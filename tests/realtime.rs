@@ -104,8 +104,7 @@ fn a_realtime_run_reports_deadlines_steps_and_every_hop() {
         scenario.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s = summary(&out);
     assert_eq!(s["mode"], "realtime");
     for kind in PROCESS_KINDS {
         assert!(

@@ -109,9 +109,11 @@ fn a_generated_group_of_100_runs_to_the_end_safe_and_every_parent_in_sight() {
         assert!(frac >= 0.95, "{v} saw its parent in {frac} of the frames");
     }
 
-    let run: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
-    assert_domain_clean(run["run_id"].as_str().unwrap());
+    assert_domain_clean(
+        wait_run_json(&out, std::time::Duration::ZERO)["run_id"]
+            .as_str()
+            .unwrap(),
+    );
 }
 
 #[test]
