@@ -69,6 +69,32 @@ fn invalid(key: impl Into<String>, reason: impl Into<String>) -> ScenarioError {
     }
 }
 
+/// Keys of the service configs that the processes derive from other
+/// settings, with where from: a scenario that sets one is refused, so that
+/// nothing a user writes is silently replaced. (The service libraries keep
+/// them as parameters, for programs that build a config directly.)
+pub const DERIVED_KEYS: [(&str, &str, &str); 7] = [
+    ("mpc", "step_s", "the mpc rate, 1 / [rates] mpc_hz"),
+    (
+        "mpc",
+        "thrust_max",
+        "the plant's saturation, [plant] thrust_max",
+    ),
+    ("follower", "slot_in_parent_m", "each follower's own slot_m"),
+    ("follower", "d_min_m", "[safety] safe_distance_m"),
+    (
+        "follower",
+        "d_a_m",
+        "each follower's own d_a_m (assigned from the formation when absent)",
+    ),
+    (
+        "follower",
+        "d_b_m",
+        "each follower's own d_b_m (assigned from the formation when absent)",
+    ),
+    ("mission", "d_min_m", "[safety] safe_distance_m"),
+];
+
 /// Rates of every process kind, and the lockstep tick.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -420,7 +446,12 @@ impl Scenario {
 
     /// Parses one service section into that service's typed config.
     pub fn section<T: serde::de::DeserializeOwned>(&self, key: &str) -> Result<T, ScenarioError> {
-        let table = match key {
+        from_table(key, self.section_table(key)?)
+    }
+
+    /// The raw table of one service section.
+    fn section_table(&self, key: &str) -> Result<&toml::Table, ScenarioError> {
+        Ok(match key {
             "mission" => &self.mission,
             "plant" => &self.plant,
             "nav" => &self.nav,
@@ -433,8 +464,7 @@ impl Scenario {
             "mpc" => &self.mpc,
             "acoustic" => &self.acoustic,
             other => return Err(invalid(other, "no such section")),
-        };
-        from_table(key, table)
+        })
     }
 
     /// Parses the obstacle list into the sonar's obstacle type.
@@ -446,9 +476,21 @@ impl Scenario {
             .collect()
     }
 
-    /// Checks the scenario's own keys: names, the formation tree, sizes, rates.
+    /// Checks the scenario's own keys: names, the formation tree, sizes,
+    /// rates, and that no section sets a key the orchestrator derives
+    /// ([`DERIVED_KEYS`]).
     pub fn validate(&self) -> Result<(), ScenarioError> {
         faults::validate(self)?;
+        for (section, key, from) in DERIVED_KEYS {
+            if self.section_table(section)?.contains_key(key) {
+                return Err(invalid(
+                    format!("{section}.{key}"),
+                    format!(
+                        "is not a setting: each process derives it from {from}; set that instead"
+                    ),
+                ));
+            }
+        }
         // The name becomes a directory name (`runs/<name>-<time>`): no paths.
         if self.name.is_empty()
             || self.name.len() > MAX_NAME_LEN
