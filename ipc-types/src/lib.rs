@@ -1,5 +1,7 @@
-//! The sample types that shoal's processes exchange over iceoryx2, and the
-//! functions that build their service names. Nothing else lives here.
+//! The sample types that shoal's processes exchange over iceoryx2, the one
+//! table of channels and sample types, and the functions that build their
+//! service names; besides them only [`SonarScan`], the decoded sonar sample
+//! that the sonar and planner libraries share. Nothing else lives here.
 //!
 //! Every sample is `#[repr(C)]`, `Copy`, fixed-size, pointer-free and
 //! `bytemuck::Pod` (so every pad byte is an explicit `_padN` field), starts
@@ -365,6 +367,67 @@ sample! {
     }
 }
 
+/// One rangefinder scan as the libraries handle it: what the sonar library
+/// produces and the planner reads, decoded from (and encoded into) a
+/// [`Sonar`] sample. Entries `0..count` are the configured beams in order;
+/// azimuth positive to starboard, elevation positive down, body axes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SonarScan {
+    /// Measured range per beam, m (meaningful where `valid`).
+    pub ranges_m: [f64; MAX_BEAMS],
+    /// Beam azimuth, rad.
+    pub azimuth_rad: [f64; MAX_BEAMS],
+    /// Beam elevation, rad.
+    pub elevation_rad: [f64; MAX_BEAMS],
+    /// `false` = no return within range.
+    pub valid: [bool; MAX_BEAMS],
+    /// Beams in use.
+    pub count: usize,
+}
+
+impl Default for SonarScan {
+    fn default() -> Self {
+        Self {
+            ranges_m: [0.0; MAX_BEAMS],
+            azimuth_rad: [0.0; MAX_BEAMS],
+            elevation_rad: [0.0; MAX_BEAMS],
+            valid: [false; MAX_BEAMS],
+            count: 0,
+        }
+    }
+}
+
+impl SonarScan {
+    /// The scan a [`Sonar`] sample carries (its count capped at [`MAX_BEAMS`]).
+    pub fn from_sample(s: &Sonar) -> Self {
+        Self {
+            ranges_m: s.ranges_m,
+            azimuth_rad: s.azimuth_rad,
+            elevation_rad: s.elevation_rad,
+            valid: s.valid.map(|v| v != 0),
+            count: (s.count as usize).min(MAX_BEAMS),
+        }
+    }
+
+    /// Writes the scan into a [`Sonar`] sample (the header untouched).
+    pub fn write_to(&self, s: &mut Sonar) {
+        s.ranges_m = self.ranges_m;
+        s.azimuth_rad = self.azimuth_rad;
+        s.elevation_rad = self.elevation_rad;
+        s.valid = self.valid.map(u8::from);
+        s.count = self.count.min(MAX_BEAMS) as u32;
+    }
+
+    /// Valid returns as `(range, azimuth, elevation)`, finite ones only.
+    pub fn returns(&self) -> impl Iterator<Item = (f64, f64, f64)> + '_ {
+        (0..self.count.min(MAX_BEAMS)).filter_map(move |i| {
+            let (r, a, e) = (self.ranges_m[i], self.azimuth_rad[i], self.elevation_rad[i]);
+            (self.valid[i] && r.is_finite() && a.is_finite() && e.is_finite() && r >= 0.0)
+                .then_some((r, a, e))
+        })
+    }
+}
+
 sample! {
     /// Beacon pixels as the follower's camera sees its parent.
     pub struct Beacons("shoal/Beacons", "shoal.Beacons.v1", size = 184) {
@@ -635,58 +698,142 @@ pub fn str_of(b: &[u8]) -> &str {
     std::str::from_utf8(&b[..end]).unwrap_or("?")
 }
 
-/// A per-vehicle channel of the channel table in DESIGN.md.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Channel {
-    /// [`Truth`]
-    Truth,
-    /// [`Nav`]
-    Nav,
-    /// [`Thrust`]
-    Thrust,
-    /// [`Sonar`]
-    Sonar,
-    /// [`Beacons`]
-    Beacons,
-    /// [`LeaderPose`]
-    LeaderPose,
-    /// [`Setpoint`]
-    Setpoint,
-    /// [`PlannerState`]
-    PlannerState,
-    /// [`MpcStats`]
-    MpcStats,
+/// Declares, from the one table below, the per-vehicle [`Channel`]s with
+/// their names and sample types, and the macros through which every user of
+/// "all channels" or "all sample types" (recorder, replay, the recording's
+/// registry, pre-flight) expands it: [`with_channel_type!`],
+/// [`with_sample_type!`], [`for_each_sample_type!`]. A new channel is one
+/// line of the table (and its producer).
+///
+/// `$d` is a literal `$`, so that the macros it declares can have
+/// metavariables of their own.
+macro_rules! sample_table {
+    (
+        $d:tt
+        vehicle { $( $(#[$cmeta:meta])* $V:ident = $vty:ident, $vname:literal; )* }
+        run { $( $rty:ident ),* $(,)? }
+    ) => {
+        /// A per-vehicle channel of the channel table in DESIGN.md.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub enum Channel {
+            $( $(#[$cmeta])* $V ),*
+        }
+
+        impl Channel {
+            /// Every per-vehicle channel.
+            pub const ALL: [Channel; [$(stringify!($V)),*].len()] = [$(Channel::$V),*];
+
+            /// The channel's name in service names and MCAP topics.
+            pub const fn name(self) -> &'static str {
+                match self {
+                    $( Channel::$V => $vname ),*
+                }
+            }
+
+            /// Size of the channel's sample, bytes.
+            pub const fn sample_size(self) -> usize {
+                match self {
+                    $( Channel::$V => std::mem::size_of::<$vty>() ),*
+                }
+            }
+
+            /// The ros2msg / MCAP schema name of the channel's sample.
+            pub const fn schema_name(self) -> &'static str {
+                match self {
+                    $( Channel::$V => <$vty as Described>::ROS_NAME ),*
+                }
+            }
+        }
+
+        /// Every sample type's ros2msg / MCAP schema name: the per-vehicle
+        /// channels' in [`Channel::ALL`] order, then the run-level ones.
+        pub const SAMPLE_SCHEMAS: [&str; [$(stringify!($vty)),* , $(stringify!($rty)),*].len()] = [
+            $( <$vty as Described>::ROS_NAME ),* ,
+            $( <$rty as Described>::ROS_NAME ),*
+        ];
+
+        /// Evaluates `$body` with `$T` the sample type of a [`Channel`]:
+        /// `with_channel_type!(ch, T => std::mem::size_of::<T>())`.
+        #[macro_export]
+        macro_rules! with_channel_type {
+            ($d ch:expr, $d T:ident => $d body:expr) => {
+                match $d ch {
+                    $( $d crate::Channel::$V => {
+                        #[allow(dead_code)]
+                        #[allow(dead_code)]
+                    type $d T = $d crate::$vty;
+                        $d body
+                    } )*
+                }
+            };
+        }
+
+        /// Evaluates `$body` with `$T` the sample type whose ros2msg schema
+        /// name is `$schema` (`"shoal/Nav"`), or `$other` if none is.
+        #[macro_export]
+        macro_rules! with_sample_type {
+            ($d schema:expr, $d T:ident => $d body:expr, else $d other:expr) => {{
+                let schema: &str = $d schema;
+                $( if schema == <$d crate::$vty as $d crate::Described>::ROS_NAME {
+                    #[allow(dead_code)]
+                    type $d T = $d crate::$vty;
+                    $d body
+                } else )*
+                $( if schema == <$d crate::$rty as $d crate::Described>::ROS_NAME {
+                    #[allow(dead_code)]
+                    type $d T = $d crate::$rty;
+                    $d body
+                } else )*
+                { $d other }
+            }};
+        }
+
+        /// Runs `$body` once per sample type, with `$T` that type, in
+        /// [`SAMPLE_SCHEMAS`] order.
+        #[macro_export]
+        macro_rules! for_each_sample_type {
+            ($d T:ident => $d body:expr) => {{
+                $( {
+                    #[allow(dead_code)]
+                    type $d T = $d crate::$vty;
+                    $d body;
+                } )*
+                $( {
+                    #[allow(dead_code)]
+                    type $d T = $d crate::$rty;
+                    $d body;
+                } )*
+            }};
+        }
+    };
+}
+
+sample_table! {
+    $
+    vehicle {
+        /// [`Truth`]
+        Truth = Truth, "truth";
+        /// [`Nav`]
+        Nav = Nav, "nav";
+        /// [`Thrust`]
+        Thrust = Thrust, "thrust";
+        /// [`Sonar`]
+        Sonar = Sonar, "sonar";
+        /// [`Beacons`]
+        Beacons = Beacons, "beacons";
+        /// [`LeaderPose`]
+        LeaderPose = LeaderPose, "leader_pose";
+        /// [`Setpoint`]
+        Setpoint = Setpoint, "setpoint";
+        /// [`PlannerState`]
+        PlannerState = PlannerState, "planner_state";
+        /// [`MpcStats`]
+        MpcStats = MpcStats, "mpc_stats";
+    }
+    run { World, Clock, ProcessStats, Event }
 }
 
 impl Channel {
-    /// Every per-vehicle channel.
-    pub const ALL: [Channel; 9] = [
-        Channel::Truth,
-        Channel::Nav,
-        Channel::Thrust,
-        Channel::Sonar,
-        Channel::Beacons,
-        Channel::LeaderPose,
-        Channel::Setpoint,
-        Channel::PlannerState,
-        Channel::MpcStats,
-    ];
-
-    /// The channel's name in service names and MCAP topics.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Channel::Truth => "truth",
-            Channel::Nav => "nav",
-            Channel::Thrust => "thrust",
-            Channel::Sonar => "sonar",
-            Channel::Beacons => "beacons",
-            Channel::LeaderPose => "leader_pose",
-            Channel::Setpoint => "setpoint",
-            Channel::PlannerState => "planner_state",
-            Channel::MpcStats => "mpc_stats",
-        }
-    }
-
     /// True for channels that carry ground truth.
     pub const fn is_ground_truth(self) -> bool {
         matches!(self, Channel::Truth)
@@ -750,6 +897,37 @@ pub fn topic(vehicle: &str, channel: Channel) -> String {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn the_sample_table_agrees_with_itself() {
+        let mut seen = std::collections::BTreeSet::new();
+        for s in SAMPLE_SCHEMAS {
+            assert!(seen.insert(s), "{s} listed twice");
+            let size = with_sample_type!(s, T => std::mem::size_of::<T>(), else 0);
+            assert!(size > 0, "{s} has no type");
+            assert_eq!(
+                with_sample_type!(s, T => <T as Described>::ROS_NAME, else ""),
+                s
+            );
+        }
+        assert_eq!(with_sample_type!("shoal/Nope", T => 1, else 0), 0);
+        let mut n = 0;
+        for_each_sample_type!(T => {
+            check_layout::<T>();
+            n += 1;
+        });
+        assert_eq!(n, SAMPLE_SCHEMAS.len());
+        for (i, c) in Channel::ALL.into_iter().enumerate() {
+            assert_eq!(SAMPLE_SCHEMAS[i], c.schema_name());
+            assert_eq!(
+                with_channel_type!(c, T => std::mem::size_of::<T>()),
+                c.sample_size()
+            );
+        }
+        assert_eq!(Channel::Nav.sample_size(), std::mem::size_of::<Nav>());
+        assert_eq!(Channel::MpcStats.schema_name(), "shoal/MpcStats");
+        assert_eq!(SAMPLE_SCHEMAS.len(), Channel::ALL.len() + 4);
+    }
 
     fn check_layout<T: Sample>() {
         assert_eq!(

@@ -19,12 +19,14 @@
 //! assert_eq!(rec.channels()[0].topic, "/L/nav");
 //! ```
 
+mod diff;
 mod reader;
 mod recover;
 mod registry;
 mod scan;
 mod writer;
 
+pub use diff::first_field_difference;
 pub use reader::{ChannelStats, InspectReport, Recording, RecordingError, StoredMessage};
 pub use recover::{merge, recover, RecoverError, RecoverReport};
 pub use registry::{all_types, type_info_by_schema, TypeInfo};

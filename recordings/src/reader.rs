@@ -232,6 +232,17 @@ impl Recording {
         out
     }
 
+    /// One hash of the whole recording: SHA-256 over [`Self::message_hashes`]
+    /// in order, hex. Two lockstep runs of the same scenario and seed give
+    /// the same digest (`shoal inspect --digest`).
+    pub fn digest(&self) -> String {
+        let mut h = Sha256::new();
+        for m in self.message_hashes() {
+            h.update(m);
+        }
+        h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+    }
+
     /// What `shoal inspect` prints.
     pub fn inspect(&self) -> InspectReport {
         let mut per: BTreeMap<String, ChannelStats> = BTreeMap::new();

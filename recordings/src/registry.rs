@@ -41,24 +41,11 @@ pub fn type_info<T: Sample>() -> TypeInfo {
     }
 }
 
-/// Every sample type shoal records.
+/// Every sample type shoal records ([`ipc_types::SAMPLE_SCHEMAS`] order).
 pub fn all_types() -> Vec<TypeInfo> {
-    use ipc_types::*;
-    vec![
-        type_info::<Truth>(),
-        type_info::<Nav>(),
-        type_info::<Thrust>(),
-        type_info::<World>(),
-        type_info::<Sonar>(),
-        type_info::<Beacons>(),
-        type_info::<LeaderPose>(),
-        type_info::<Setpoint>(),
-        type_info::<PlannerState>(),
-        type_info::<MpcStats>(),
-        type_info::<Clock>(),
-        type_info::<ProcessStats>(),
-        type_info::<Event>(),
-    ]
+    let mut all = Vec::with_capacity(ipc_types::SAMPLE_SCHEMAS.len());
+    ipc_types::for_each_sample_type!(T => all.push(type_info::<T>()));
+    all
 }
 
 /// Looks a type up by its schema name.

@@ -1,4 +1,4 @@
-//! `shoal compare`: the two comparisons the paper argues but does not
+//! `shoal compare`'s variants and table: the two comparisons the paper argues but does not
 //! measure, run side by side with the method on the same scenario and seed.
 //!
 //! - **method**: the scenario as given (camera + PnP, vertical shift on).
@@ -16,14 +16,9 @@
 //! Writes `compare.md`, `compare.json` and `compare.png`/`.svg` (slot error,
 //! minimum distance and parent fixes over time, one curve per variant).
 
-use std::path::PathBuf;
-
-use anyhow::Context;
-use serde_json::{json, Value};
-use shoal_runtime::Mode;
 use shoal_scenario::{Perception, Scenario};
 
-use crate::{load_scenario, run_and_summarize, CompareCmd, RunSettings};
+use super::summary::{min_value, Summary};
 
 /// The variants, in table order.
 pub fn variants(base: &Scenario) -> anyhow::Result<Vec<(&'static str, Scenario)>> {
@@ -46,110 +41,77 @@ pub fn variants(base: &Scenario) -> anyhow::Result<Vec<(&'static str, Scenario)>
     ])
 }
 
-fn f(v: &Value, p: &str) -> f64 {
-    v.pointer(p).and_then(Value::as_f64).unwrap_or(f64::NAN)
-}
-
-/// The smallest of a map of per-follower numbers.
-fn min_of(v: &Value, p: &str) -> f64 {
-    v.pointer(p)
-        .and_then(Value::as_object)
-        .map(|m| {
-            m.values()
-                .filter_map(Value::as_f64)
-                .fold(f64::INFINITY, f64::min)
-        })
-        .unwrap_or(f64::NAN)
-}
-
 /// One row of the comparison table.
-pub fn row(name: &str, s: &Value) -> Value {
-    json!({
-        "variant": name,
-        "slot_error_rms_before_m": f(s, "/formation/slot_error_rms_m/before"),
-        "slot_error_rms_during_m": f(s, "/formation/slot_error_rms_m/during"),
-        "slot_error_rms_after_m": f(s, "/formation/slot_error_rms_m/after"),
-        "min_pair_distance_m": f(s, "/safety/min_pair_distance_m"),
-        "min_pair": s.pointer("/safety/min_pair").cloned().unwrap_or(Value::Null),
-        "collisions": f(s, "/safety/collisions"),
-        "min_obstacle_clearance_m": f(s, "/safety/min_obstacle_clearance_m"),
-        "min_visible_fraction": min_of(s, "/perception/leader_visible_fraction"),
-        "min_visible_fraction_in_passage": min_of(s, "/perception/parent_visible_fraction_in_passage"),
-        "min_fix_rate_hz": min_of(s, "/perception/parent_fix_rate_hz"),
-        "pose_error_p95_m": f(s, "/perception/pose_error_m/p95"),
-    })
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Row {
+    /// `method`, `acoustic` or `no_vertical_shift`.
+    pub variant: String,
+    /// RMS slot error before the passage, m.
+    pub slot_error_rms_before_m: f64,
+    /// RMS slot error during the passage, m.
+    pub slot_error_rms_during_m: f64,
+    /// RMS slot error after the passage, m.
+    pub slot_error_rms_after_m: f64,
+    /// Smallest distance between two vehicles, m.
+    pub min_pair_distance_m: Option<f64>,
+    /// The pair it was.
+    pub min_pair: String,
+    /// Pairs closer than the collision distance.
+    pub collisions: usize,
+    /// Smallest distance to an obstacle, m.
+    pub min_obstacle_clearance_m: Option<f64>,
+    /// Least share of a follower's frames with a fix of its parent.
+    pub min_visible_fraction: Option<f64>,
+    /// The same within the passage.
+    pub min_visible_fraction_in_passage: Option<f64>,
+    /// Least rate of fixes of any follower, Hz.
+    pub min_fix_rate_hz: Option<f64>,
+    /// 95th percentile of the pose error, m.
+    pub pose_error_p95_m: f64,
+}
+
+/// The row of variant `name` from its summary.
+pub fn row(name: &str, s: &Summary) -> Row {
+    let p = &s.perception;
+    Row {
+        variant: name.to_string(),
+        slot_error_rms_before_m: s.formation.slot_error_rms_m.before,
+        slot_error_rms_during_m: s.formation.slot_error_rms_m.during,
+        slot_error_rms_after_m: s.formation.slot_error_rms_m.after,
+        min_pair_distance_m: s.safety.min_pair_distance_m,
+        min_pair: s.safety.min_pair.clone(),
+        collisions: s.safety.collisions,
+        min_obstacle_clearance_m: s.safety.min_obstacle_clearance_m,
+        min_visible_fraction: min_value(&p.leader_visible_fraction),
+        min_visible_fraction_in_passage: min_value(&p.parent_visible_fraction_in_passage),
+        min_fix_rate_hz: min_value(&p.parent_fix_rate_hz),
+        pose_error_p95_m: p.pose_error_m.p95,
+    }
 }
 
 /// A markdown table of the rows.
-pub fn table(rows: &[Value], safe: f64) -> String {
+pub fn table(rows: &[Row], safe: f64) -> String {
     let mut t = String::from(
         "| variant | slot rms before m | slot rms during m | slot rms after m | min pair m | collisions | min clearance m | min fix fraction | min fix fraction in passage | min fix rate Hz | pose err p95 m |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
+    let nan = |x: Option<f64>| x.unwrap_or(f64::NAN);
     for r in rows {
-        let g = |k: &str| r[k].as_f64().unwrap_or(f64::NAN);
+        let min_pair = nan(r.min_pair_distance_m);
         t.push_str(&format!(
-            "| {} | {:.2} | {:.2} | {:.2} | {:.2}{} | {:.0} | {:.2} | {:.3} | {:.3} | {:.2} | {:.2} |\n",
-            r["variant"].as_str().unwrap_or(""),
-            g("slot_error_rms_before_m"),
-            g("slot_error_rms_during_m"),
-            g("slot_error_rms_after_m"),
-            g("min_pair_distance_m"),
-            if g("min_pair_distance_m") < safe {
-                " (below safe)"
-            } else {
-                ""
-            },
-            g("collisions"),
-            g("min_obstacle_clearance_m"),
-            g("min_visible_fraction"),
-            g("min_visible_fraction_in_passage"),
-            g("min_fix_rate_hz"),
-            g("pose_error_p95_m"),
+            "| {} | {:.2} | {:.2} | {:.2} | {:.2}{} | {} | {:.2} | {:.3} | {:.3} | {:.2} | {:.2} |\n",
+            r.variant,
+            r.slot_error_rms_before_m,
+            r.slot_error_rms_during_m,
+            r.slot_error_rms_after_m,
+            min_pair,
+            if min_pair < safe { " (below safe)" } else { "" },
+            r.collisions,
+            nan(r.min_obstacle_clearance_m),
+            nan(r.min_visible_fraction),
+            nan(r.min_visible_fraction_in_passage),
+            nan(r.min_fix_rate_hz),
+            r.pose_error_p95_m,
         ));
     }
     t
-}
-
-pub fn cmd_compare(cmd: CompareCmd) -> anyhow::Result<()> {
-    let mut base = load_scenario(&cmd.scenario)?;
-    if let Some(s) = cmd.seed {
-        base.seed = s;
-    }
-    let out = cmd.out.unwrap_or_else(|| {
-        let secs = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_secs())
-            .unwrap_or(0);
-        PathBuf::from("runs").join(format!("compare-{}-{secs}", base.name))
-    });
-    let settings = RunSettings::new(Mode::Lockstep, cmd.bin_dir, cmd.quiet, 30.0)?;
-    let mut rows = Vec::new();
-    let mut runs = Vec::new();
-    for (name, scenario) in variants(&base)? {
-        eprintln!("== {name}");
-        let done = run_and_summarize(scenario, &out.join(name), &settings)
-            .with_context(|| format!("variant {name}"))?;
-        rows.push(row(name, &done.summary));
-        runs.push((name, done));
-    }
-    let refs: Vec<_> = runs
-        .iter()
-        .map(|(n, d)| (*n, &d.scenario, &d.recording))
-        .collect();
-    crate::plots::write_compare_plot(&refs, &out).context("writing the comparison plot")?;
-    let md = format!(
-        "# {} (seed {}): method vs acoustic baseline vs no vertical shift\n\nsafe distance {} m\n\n{}",
-        base.name,
-        base.seed,
-        base.safety.safe_distance_m,
-        table(&rows, base.safety.safe_distance_m)
-    );
-    std::fs::write(out.join("compare.md"), &md)?;
-    std::fs::write(
-        out.join("compare.json"),
-        serde_json::to_string_pretty(&rows)?,
-    )?;
-    print!("{md}");
-    println!("{}", out.display());
-    Ok(())
 }

@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context};
 use serde_json::{json, Value};
 
-use crate::sys;
+use crate::launch::os as sys;
 
 /// The name of the peer binary (package `shoal-bench-ipc`).
 const PEER_BIN: &str = "shoal-ipc-peer";
@@ -228,7 +228,7 @@ impl Peers {
                         bail!(
                             "{} failed ({status}):\n{}",
                             p.label,
-                            crate::supervisor::tail(&p.log, 12)
+                            crate::launch::supervisor::tail(&p.log, 12)
                         );
                     }
                 }
@@ -417,7 +417,7 @@ pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
             .filter(|c| cmd.cases.iter().any(|x| x == c))
             .collect()
     };
-    let bin_dir = crate::bin_dir_or_default(cmd.bin_dir.clone())?;
+    let bin_dir = crate::launch::bin_dir_or_default(cmd.bin_dir.clone())?;
     let bin = bin_dir.join(PEER_BIN);
     if !bin.is_file() {
         bail!(
@@ -445,7 +445,7 @@ pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
     };
 
     let per_pass = cmd.iterations.div_ceil(cmd.passes);
-    let load_before = crate::sys::load_average();
+    let load_before = crate::launch::os::load_average();
     let start = Instant::now();
     let mut rtts: Vec<Vec<Vec<u64>>> = vec![vec![Vec::new(); cases.len()]; cmd.sizes.len()];
     let mut preempted: Vec<Vec<Option<u64>>> = vec![vec![None; cases.len()]; cmd.sizes.len()];
@@ -491,7 +491,7 @@ pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
             .collect::<anyhow::Result<_>>()?
     };
     let wall_s = start.elapsed().as_secs_f64();
-    let load_after = crate::sys::load_average();
+    let load_after = crate::launch::os::load_average();
 
     let mut stats = Vec::new();
     for (si, &size) in cmd.sizes.iter().enumerate() {

@@ -25,7 +25,14 @@ use anyhow::Context;
 use serde_json::{json, Value};
 use shoal_runtime::Mode;
 
-use crate::{load_scenario, run_and_summarize, sys, ProcessArgs, RunSettings};
+use shoal_runtime::latency::LatencySummary;
+
+use crate::analysis::summary::Summary;
+use crate::cli::ProcessArgs;
+use crate::launch::os as sys;
+use crate::launch::RunSettings;
+use crate::pipeline::run_and_summarize;
+use crate::preflight::load_scenario;
 
 /// Issue 7: the paper scenario in lockstep at ≥ 50× real time.
 const GOAL_RTF: f64 = 50.0;
@@ -79,44 +86,28 @@ struct LockstepRun {
     cpu_s: BTreeMap<String, f64>,
 }
 
-/// The number at JSON pointer `p` of a run's summary.json.
-pub(crate) fn summary_number(s: &Value, p: &str) -> anyhow::Result<f64> {
-    s.pointer(p)
-        .and_then(Value::as_f64)
-        .with_context(|| format!("summary.json has no number at {p}"))
-}
-
-/// CPU seconds by process kind from a run's summary.json, with
+/// CPU seconds by process kind from a run's summary, with
 /// `not_this_run_s` taken off the orchestrator's: its figure is this
 /// process's cumulative CPU, which in a benchmark spans earlier runs.
-pub(crate) fn summary_cpu_s(
-    s: &Value,
-    not_this_run_s: f64,
-) -> anyhow::Result<BTreeMap<String, f64>> {
-    let mut cpu_s: BTreeMap<String, f64> = s
-        .get("cpu_time_s")
-        .and_then(Value::as_object)
-        .context("summary.json has no cpu_time_s")?
-        .iter()
-        .filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x)))
-        .collect();
+pub(crate) fn summary_cpu_s(s: &Summary, not_this_run_s: f64) -> BTreeMap<String, f64> {
+    let mut cpu_s = s.cpu_time_s.clone();
     if let Some(o) = cpu_s.get_mut("orchestrator") {
         *o = (*o - not_this_run_s).max(0.0);
     }
-    Ok(cpu_s)
+    cpu_s
 }
 
 impl LockstepRun {
     /// Reads a run's figures from its summary. `orchestrator_cpu_before` is
     /// this process's CPU time when the run started: the summary reports
     /// the orchestrator's cumulative CPU, which here spans earlier runs.
-    fn from_summary(s: &Value, orchestrator_cpu_before: f64) -> anyhow::Result<Self> {
-        Ok(Self {
-            rtf: summary_number(s, "/real_time_factor")?,
-            wall_s: summary_number(s, "/wall_time_s")?,
-            sim_s: summary_number(s, "/sim_time_s")?,
-            cpu_s: summary_cpu_s(s, orchestrator_cpu_before)?,
-        })
+    fn from_summary(s: &Summary, orchestrator_cpu_before: f64) -> Self {
+        Self {
+            rtf: s.real_time_factor,
+            wall_s: s.wall_time_s,
+            sim_s: s.sim_time_s,
+            cpu_s: summary_cpu_s(s, orchestrator_cpu_before),
+        }
     }
 
     fn total_cpu(&self) -> f64 {
@@ -261,20 +252,19 @@ fn render_lockstep(variants: &[Variant]) -> String {
 
 /// Percentile cells of a latency summary (`p50`, `p99`, `p999`, `max`,
 /// `count`, µs) as printed.
-fn latency_cells(v: &Value) -> String {
-    let f = |k: &str| v.get(k).and_then(Value::as_f64).unwrap_or(f64::NAN);
+fn latency_cells(v: &LatencySummary) -> String {
     format!(
         "{:>10} {:>10} {:>10} {:>10} {:>8}",
-        fmt_num(f("p50")),
-        fmt_num(f("p99")),
-        fmt_num(f("p999")),
-        fmt_num(f("max")),
-        f("count")
+        fmt_num(v.p50),
+        fmt_num(v.p99),
+        fmt_num(v.p999),
+        fmt_num(v.max),
+        v.count
     )
 }
 
 /// The realtime tables, from a realtime run's summary.json.
-fn render_realtime(s: &Value) -> String {
+fn render_realtime(s: &Summary) -> String {
     let mut out = String::new();
     let head = format!(
         "{:>10} {:>10} {:>10} {:>10} {:>8}",
@@ -283,23 +273,25 @@ fn render_realtime(s: &Value) -> String {
     let _ = writeln!(
         out,
         "realtime: {} s on the wall clock ({:.1} s wall)",
-        fmt_num(s["sim_time_s"].as_f64().unwrap_or(f64::NAN)),
-        s["wall_time_s"].as_f64().unwrap_or(f64::NAN)
+        fmt_num(s.sim_time_s),
+        s.wall_time_s
     );
     let _ = writeln!(out, "{:<26}{head}", "latency, µs");
-    let e2e = s.pointer("/latency_us/end_to_end").unwrap_or(&Value::Null);
-    let _ = writeln!(out, "{:<26}{}", "end to end", latency_cells(e2e));
+    let _ = writeln!(
+        out,
+        "{:<26}{}",
+        "end to end",
+        latency_cells(&s.latency_us.end_to_end)
+    );
     let _ = writeln!(
         out,
         "{:<26}(camera frame or sonar ping -> thrust applied by sim-plant)",
         ""
     );
-    let misses = s.get("deadline_misses").and_then(Value::as_object);
-    let late = s.get("wake_late_us").and_then(Value::as_object);
-    let kinds: BTreeSet<&String> = misses
-        .into_iter()
-        .flat_map(|m| m.keys())
-        .chain(late.into_iter().flat_map(|m| m.keys()))
+    let kinds: BTreeSet<&String> = s
+        .deadline_misses
+        .keys()
+        .chain(s.wake_late_us.keys())
         .collect();
     let _ = writeln!(
         out,
@@ -307,22 +299,19 @@ fn render_realtime(s: &Value) -> String {
         "process kind", "deadline misses", "wake-up late p99, µs"
     );
     for k in kinds {
-        let m = misses
-            .and_then(|m| m.get(k))
-            .and_then(Value::as_f64)
+        let m = s
+            .deadline_misses
+            .get(k)
             .map_or("-".to_string(), |x| format!("{x}"));
-        let l = late
-            .and_then(|m| m.get(k))
-            .and_then(|v| v.get("p99"))
-            .and_then(Value::as_f64)
-            .map_or("-".to_string(), fmt_num);
+        let l = s
+            .wake_late_us
+            .get(k)
+            .map_or("-".to_string(), |v| fmt_num(v.p99));
         let _ = writeln!(out, "{k:<26}{m:>16} {l:>21}");
     }
     let _ = writeln!(out, "\n{:<26}{head}", "hop (publish -> take), µs");
-    if let Some(hops) = s.pointer("/latency_us/hops").and_then(Value::as_object) {
-        for (k, v) in hops {
-            let _ = writeln!(out, "{k:<26}{}", latency_cells(v));
-        }
+    for (k, v) in &s.latency_us.hops {
+        let _ = writeln!(out, "{k:<26}{}", latency_cells(v));
     }
     out
 }
@@ -349,7 +338,7 @@ fn one_run(
     scenario: &shoal_scenario::Scenario,
     out: &Path,
     settings: &RunSettings,
-) -> anyhow::Result<(Value, f64)> {
+) -> anyhow::Result<(Summary, f64)> {
     let cpu_before = sys::self_cpu_s();
     let summary = run_and_summarize(scenario.clone(), out, settings)
         .with_context(|| format!("the run into {} failed", out.display()))?
@@ -377,7 +366,7 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
     std::fs::create_dir_all(&scratch.path)
         .with_context(|| format!("cannot create {}", scratch.path.display()))?;
     let started = Instant::now();
-    let load_before = crate::sys::load_average();
+    let load_before = crate::launch::os::load_average();
 
     let mut variants = vec![
         Variant {
@@ -403,8 +392,8 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
                 i + 1
             ));
             let (summary, cpu_before) = one_run(&scenario, &out, &settings)?;
-            processes = processes.or(summary["processes"].as_u64());
-            let r = LockstepRun::from_summary(&summary, cpu_before)?;
+            processes = processes.or(Some(summary.processes));
+            let r = LockstepRun::from_summary(&summary, cpu_before);
             eprintln!(
                 "  lockstep, {:<22} run {}/{}: {:.1}x real time, {:.2} s wall, {:.2} s CPU",
                 v.label,
@@ -431,7 +420,7 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
     } else {
         None
     };
-    let load_after = crate::sys::load_average();
+    let load_after = crate::launch::os::load_average();
     let elapsed = started.elapsed().as_secs_f64();
 
     let load = |l: Option<f64>| l.map_or("?".to_string(), |x| format!("{x:.2}"));
@@ -489,11 +478,11 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
             "elapsed_s": elapsed,
             "lockstep": variants.iter().map(variant_json).collect::<Vec<_>>(),
             "realtime": realtime.as_ref().map(|s| json!({
-                "sim_time_s": s["sim_time_s"], "wall_time_s": s["wall_time_s"],
-                "cpu_time_s": s["cpu_time_s"],
-                "latency_us": s["latency_us"], "deadline_misses": s["deadline_misses"],
-                "wake_late_us": s["wake_late_us"], "step_us": s["step_us"],
-                "samples_lost": s["samples_lost"], "samples_rejected": s["samples_rejected"],
+                "sim_time_s": s.sim_time_s, "wall_time_s": s.wall_time_s,
+                "cpu_time_s": s.cpu_time_s,
+                "latency_us": s.latency_us, "deadline_misses": s.deadline_misses,
+                "wake_late_us": s.wake_late_us, "step_us": s.step_us,
+                "samples_lost": s.samples_lost, "samples_rejected": s.samples_rejected,
             })),
         });
         std::fs::write(path, serde_json::to_string_pretty(&doc)?)
@@ -507,6 +496,7 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::analysis::summary::Latency;
 
     fn run_with(rtf: f64, wall: f64, cpu: &[(&str, f64)]) -> LockstepRun {
         LockstepRun {
@@ -528,16 +518,22 @@ mod tests {
 
     #[test]
     fn a_summary_gives_the_run_figures_and_the_orchestrator_cpu_of_this_run_only() {
-        let s = json!({
-            "real_time_factor": 40.0, "wall_time_s": 5.0, "sim_time_s": 200.0,
-            "cpu_time_s": { "mpc": 3.0, "orchestrator": 10.5, "world": 0.5 },
-        });
-        let r = LockstepRun::from_summary(&s, 10.0).unwrap();
+        let s = Summary {
+            real_time_factor: 40.0,
+            wall_time_s: 5.0,
+            sim_time_s: 200.0,
+            cpu_time_s: [("mpc", 3.0), ("orchestrator", 10.5), ("world", 0.5)]
+                .map(|(k, v)| (k.to_string(), v))
+                .into(),
+            ..Summary::default()
+        };
+        let r = LockstepRun::from_summary(&s, 10.0);
         assert_eq!(r.rtf, 40.0);
         assert_eq!(r.cpu_s["orchestrator"], 0.5);
         assert_eq!(r.total_cpu(), 4.0);
         assert_eq!(r.cpu_per_sim_s(), 4.0 / 200.0);
-        assert!(LockstepRun::from_summary(&json!({ "real_time_factor": 1.0 }), 0.0).is_err());
+        // A summary.json that lacks a figure is refused when read, not read as 0.
+        assert!(serde_json::from_value::<Summary>(json!({ "real_time_factor": 1.0 })).is_err());
     }
 
     #[test]
@@ -583,13 +579,28 @@ mod tests {
 
     #[test]
     fn realtime_table_reads_the_summary_sections() {
-        let lat = |p50: f64| json!({ "p50": p50, "p99": 2.0 * p50, "p999": 3.0 * p50, "max": 4.0 * p50, "count": 7 });
-        let s = json!({
-            "sim_time_s": 60.0, "wall_time_s": 60.4,
-            "latency_us": { "end_to_end": lat(1500.0), "hops": { "nav": lat(12.0), "truth": lat(9.0) } },
-            "deadline_misses": { "mpc": 3, "world": 0 },
-            "wake_late_us": { "mpc": lat(50.0) },
-        });
+        let lat = |p50: f64| LatencySummary {
+            p50,
+            p99: 2.0 * p50,
+            p999: 3.0 * p50,
+            max: 4.0 * p50,
+            count: 7,
+        };
+        let s = Summary {
+            sim_time_s: 60.0,
+            wall_time_s: 60.4,
+            latency_us: Latency {
+                end_to_end: lat(1500.0),
+                hops: [
+                    ("nav".to_string(), lat(12.0)),
+                    ("truth".to_string(), lat(9.0)),
+                ]
+                .into(),
+            },
+            deadline_misses: [("mpc".to_string(), 3), ("world".to_string(), 0)].into(),
+            wake_late_us: [("mpc".to_string(), lat(50.0))].into(),
+            ..Summary::default()
+        };
         let t = render_realtime(&s);
         let e2e = t.lines().find(|l| l.starts_with("end to end")).unwrap();
         assert!(

@@ -3,7 +3,7 @@
 //! For each group size N of `--vehicles` (default 5, 25, 50, 100) it
 //! generates a scenario with the generator of `shoal gen` (`--shape`,
 //! `--seed`), cuts it to `--duration-s` simulated seconds, checks that the
-//! machine can hold the run ([`check::needs`] / [`check::fits`]: processes,
+//! machine can hold the run ([`preflight::needs`] / [`preflight::fits`]: processes,
 //! `/dev/shm`, open files) and runs it in lockstep through the same code as
 //! `shoal run`, into `OUT/nNNN/` (recording, summary.json, logs). A size the
 //! machine cannot hold is skipped with its reason in the table; a run that
@@ -55,9 +55,14 @@ use serde_json::{json, Value};
 use shoal_runtime::Mode;
 use shoal_scenario::Scenario;
 
-use crate::bench_run::fmt_num;
+use super::run::fmt_num;
 use crate::gen::{self, GenOptions, Shape};
-use crate::{check, plots, run, summary, sys, RunSettings};
+use crate::launch::os as sys;
+use crate::launch::{self, RunSettings};
+use serde::{Deserialize, Serialize};
+
+use crate::analysis::summary::{self, Summary};
+use crate::{plots, preflight};
 
 /// Issue 8: cost per vehicle-second at N = 100 at most this multiple of
 /// the cost at N = 25.
@@ -105,7 +110,7 @@ pub struct ScaleCmd {
     #[arg(long)]
     pub plots: bool,
     #[command(flatten)]
-    pub processes: crate::ProcessArgs,
+    pub processes: crate::cli::ProcessArgs,
 }
 
 fn parse_vehicles(s: &str) -> Result<usize, String> {
@@ -127,6 +132,38 @@ fn parse_duration(s: &str) -> Result<f64, String> {
         Ok(d) if d.is_finite() && d > 0.0 => Ok(d),
         _ => Err(format!("`{s}` is not a positive number of seconds")),
     }
+}
+
+/// `summary.json` of one run of this benchmark: the run's summary and
+/// what the benchmark measured around it.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ScaleSummary {
+    /// The run's summary.
+    #[serde(flatten)]
+    pub run: Summary,
+    /// Wall time of the whole run call (spawn to reap), s.
+    pub run_call_s: Option<f64>,
+    /// Memory sampled from `/proc` while the run went.
+    pub memory_sampled: MemorySampled,
+}
+
+/// Peak memory per process kind, sampled from `/proc` while a run went.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct MemorySampled {
+    /// Peak RSS (`VmHWM`) summed over the processes of each kind, KiB.
+    pub peak_rss_kib: BTreeMap<String, i64>,
+    /// Peak private memory (`RssAnon`) summed per kind, KiB.
+    pub peak_private_kib: BTreeMap<String, i64>,
+    /// Processes seen.
+    pub processes_sampled: usize,
+    /// Sweeps over the processes.
+    pub sweeps: u64,
+    /// Time between sweeps, s.
+    pub period_s: f64,
+    /// CPU time of the sampling thread, s.
+    pub sampler_cpu_s: f64,
+    /// Whether the orchestrator's own peak could be reset before the run.
+    pub orchestrator_peak_reset: bool,
 }
 
 /// The figures of one run, read from its summary.json.
@@ -170,57 +207,28 @@ impl Figures {
     /// process's CPU time when the run started: the summary has the
     /// orchestrator's cumulative CPU, which here spans earlier runs; the
     /// memory sampler's own CPU is taken out of it too.
-    fn from_summary(s: &Value, orchestrator_cpu_before: f64) -> anyhow::Result<Self> {
-        let num = |p: &str| crate::bench_run::summary_number(s, p);
-        let count = |p: &str| {
-            s.pointer(p)
-                .and_then(Value::as_u64)
-                .with_context(|| format!("summary.json has no count at {p}"))
-        };
-        let sampler_cpu_s = s
-            .pointer("/memory_sampled/sampler_cpu_s")
-            .and_then(Value::as_f64)
-            .unwrap_or(0.0);
-        let cpu_s = crate::bench_run::summary_cpu_s(s, orchestrator_cpu_before + sampler_cpu_s)?;
-        let per_kind = |key: &str| -> anyhow::Result<BTreeMap<String, i64>> {
-            Ok(s.pointer(&format!("/memory_sampled/{key}"))
-                .and_then(Value::as_object)
-                .with_context(|| format!("summary.json has no memory_sampled.{key}"))?
-                .iter()
-                .filter_map(|(k, v)| v.as_i64().map(|x| (k.clone(), x)))
-                .collect())
-        };
-        let extreme = |p: &str, min: bool| {
-            s.pointer(p).and_then(Value::as_object).and_then(|m| {
-                let values = m.values().filter_map(Value::as_f64);
-                if min {
-                    values.min_by(f64::total_cmp)
-                } else {
-                    values.max_by(f64::total_cmp)
-                }
-            })
-        };
-        let min_parent_visible = extreme("/perception/leader_visible_fraction", true);
-        Ok(Self {
-            sim_s: num("/sim_time_s")?,
-            wall_s: num("/wall_time_s")?,
-            run_call_s: s.pointer("/run_call_s").and_then(Value::as_f64),
+    fn from_summary(s: &ScaleSummary, orchestrator_cpu_before: f64) -> Self {
+        let run = &s.run;
+        let cpu_s = super::run::summary_cpu_s(
+            run,
+            orchestrator_cpu_before + s.memory_sampled.sampler_cpu_s,
+        );
+        Self {
+            sim_s: run.sim_time_s,
+            wall_s: run.wall_time_s,
+            run_call_s: s.run_call_s,
             cpu_s,
-            rss_kib: per_kind("peak_rss_kib")?,
-            private_kib: per_kind("peak_private_kib")?,
-            recorder_messages: count("/recording/messages")?,
-            recorder_dropped: count("/recording/dropped")?,
-            collisions: count("/safety/collisions")?,
-            min_pair_m: s
-                .pointer("/safety/min_pair_distance_m")
-                .and_then(Value::as_f64),
-            safe_distance_m: s.pointer("/safety/safe_distance_m").and_then(Value::as_f64),
-            min_parent_visible,
-            max_parent_range_m: extreme("/perception/parent_range_max_m", false),
-            visibility_range_m: s
-                .pointer("/perception/visibility_range_m")
-                .and_then(Value::as_f64),
-        })
+            rss_kib: s.memory_sampled.peak_rss_kib.clone(),
+            private_kib: s.memory_sampled.peak_private_kib.clone(),
+            recorder_messages: run.recording.messages,
+            recorder_dropped: run.recording.dropped,
+            collisions: run.safety.collisions as u64,
+            min_pair_m: run.safety.min_pair_distance_m,
+            safe_distance_m: Some(run.safety.safe_distance_m),
+            min_parent_visible: run.min_parent_visible(),
+            max_parent_range_m: run.max_parent_range_m(),
+            visibility_range_m: Some(run.perception.visibility_range_m),
+        }
     }
 
     /// Simulated s per wall s.
@@ -695,7 +703,7 @@ fn scenario_for(cmd: &ScaleCmd, n: usize) -> anyhow::Result<Scenario> {
     let mut s = Scenario::from_toml(&text)
         .with_context(|| format!("the generated scenario of N = {n} does not parse"))?;
     s.duration_s = cmd.duration_s;
-    check::resolve(&mut s).with_context(|| format!("the generated scenario of N = {n}"))?;
+    preflight::resolve(&mut s).with_context(|| format!("the generated scenario of N = {n}"))?;
     Ok(s)
 }
 
@@ -713,7 +721,7 @@ fn run_one(
     let cpu_before = sys::self_cpu_s();
     let sampler = MemSampler::start()?;
     let t0 = Instant::now();
-    let outcome = run::run(&opts);
+    let outcome = launch::run(&opts);
     let run_call_s = t0.elapsed().as_secs_f64();
     let peaks = sampler.finish();
     let outcome = outcome?;
@@ -723,37 +731,34 @@ fn run_one(
         private.insert("orchestrator".into(), own.anon_kib);
     }
     let rec = recordings::Recording::open(&outcome.recording)?;
-    let mut s = summary::summarize(scenario, &rec, &outcome, settings.mode.as_str());
-    if let Some(obj) = s.as_object_mut() {
-        obj.insert("run_call_s".into(), json!(run_call_s));
-        obj.insert(
-            "memory_sampled".into(),
-            json!({
-                "peak_rss_kib": rss,
-                "peak_private_kib": private,
-                "processes_sampled": peaks.procs.len(),
-                "sweeps": peaks.sweeps,
-                "period_s": MEM_SAMPLE_PERIOD.as_secs_f64(),
-                "sampler_cpu_s": peaks.sampler_cpu_s,
-                "orchestrator_peak_reset": peak_reset,
-            }),
-        );
-    }
+    let s = ScaleSummary {
+        run: summary::summarize(scenario, &rec, &outcome, settings.mode.as_str()),
+        run_call_s: Some(run_call_s),
+        memory_sampled: MemorySampled {
+            peak_rss_kib: rss,
+            peak_private_kib: private,
+            processes_sampled: peaks.procs.len(),
+            sweeps: peaks.sweeps,
+            period_s: MEM_SAMPLE_PERIOD.as_secs_f64(),
+            sampler_cpu_s: peaks.sampler_cpu_s,
+            orchestrator_peak_reset: peak_reset,
+        },
+    };
     let path = dir.join("summary.json");
     std::fs::write(&path, serde_json::to_string_pretty(&s)?)
         .with_context(|| format!("cannot write {}", path.display()))?;
     if plots {
         plots::write_plots(scenario, &rec, &dir.join("plots")).context("writing the plots")?;
     }
-    Figures::from_summary(&s, cpu_before)
+    Ok(Figures::from_summary(&s, cpu_before))
 }
 
 /// True if the error is SIGINT/SIGTERM: the benchmark stops there.
 fn interrupted(e: &anyhow::Error) -> bool {
     e.chain().any(|c| {
         matches!(
-            c.downcast_ref::<run::RunError>(),
-            Some(run::RunError::Interrupted(_))
+            c.downcast_ref::<launch::RunError>(),
+            Some(launch::RunError::Interrupted(_))
         )
     })
 }
@@ -783,7 +788,7 @@ pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let settings = cmd.processes.settings(Mode::Lockstep, false)?;
     let started = Instant::now();
-    let load_before = crate::sys::load_average();
+    let load_before = crate::launch::os::load_average();
     let mut rows: Vec<Row> = Vec::with_capacity(sizes.len());
     let mut stopped: Option<anyhow::Error> = None;
     for (i, &n) in sizes.iter().enumerate() {
@@ -803,8 +808,8 @@ pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
             }
         };
         let processes = scenario.processes().len();
-        let needs = check::needs(&scenario);
-        if let Err(e) = check::fits(&needs) {
+        let needs = preflight::needs(&scenario);
+        if let Err(e) = preflight::fits(&needs) {
             eprintln!("{tag}: skipped, the machine cannot hold it: {e:#}");
             rows.push(Row {
                 vehicles: n,
@@ -858,7 +863,7 @@ pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
             status,
         });
     }
-    let load_after = crate::sys::load_average();
+    let load_after = crate::launch::os::load_average();
     let elapsed = started.elapsed().as_secs_f64();
 
     let load = |l: Option<f64>| l.map_or("?".to_string(), |x| format!("{x:.2}"));
@@ -1119,24 +1124,37 @@ mod tests {
 
     #[test]
     fn figures_are_read_from_the_summary_with_this_runs_orchestrator_cpu() {
-        let s = json!({
-            "sim_time_s": 20.0, "wall_time_s": 8.0, "run_call_s": 11.5,
-            "cpu_time_s": { "mpc": 6.0, "orchestrator": 12.0, "world": 1.0 },
-            "memory_sampled": {
-                "peak_rss_kib": { "mpc": 20480, "orchestrator": 10240 },
-                "peak_private_kib": { "mpc": 2048, "orchestrator": 1024 },
-                "sampler_cpu_s": 0.25,
+        let map = |kv: &[(&str, f64)]| -> BTreeMap<String, f64> {
+            kv.iter().map(|(k, v)| (k.to_string(), *v)).collect()
+        };
+        let kib = |kv: &[(&str, i64)]| -> BTreeMap<String, i64> {
+            kv.iter().map(|(k, v)| (k.to_string(), *v)).collect()
+        };
+        let mut run = Summary {
+            sim_time_s: 20.0,
+            wall_time_s: 8.0,
+            cpu_time_s: map(&[("mpc", 6.0), ("orchestrator", 12.0), ("world", 1.0)]),
+            ..Summary::default()
+        };
+        run.recording.messages = 4000;
+        run.recording.dropped = 2;
+        run.safety.min_pair_distance_m = Some(2.5);
+        run.safety.safe_distance_m = 2.0;
+        run.perception.leader_visible_fraction = map(&[("F1", 0.9), ("F2", 0.75)]);
+        run.perception.parent_range_max_m = map(&[("F1", 9.5), ("F2", 11.25)]);
+        run.perception.visibility_range_m = 12.0;
+        let s = ScaleSummary {
+            run,
+            run_call_s: Some(11.5),
+            memory_sampled: MemorySampled {
+                peak_rss_kib: kib(&[("mpc", 20480), ("orchestrator", 10240)]),
+                peak_private_kib: kib(&[("mpc", 2048), ("orchestrator", 1024)]),
+                sampler_cpu_s: 0.25,
+                ..MemorySampled::default()
             },
-            "recording": { "messages": 4000, "dropped": 2 },
-            "safety": { "collisions": 0, "min_pair_distance_m": 2.5, "safe_distance_m": 2.0 },
-            "perception": {
-                "leader_visible_fraction": { "F1": 0.9, "F2": 0.75 },
-                "parent_range_max_m": { "F1": 9.5, "F2": 11.25 },
-                "visibility_range_m": 12.0,
-            },
-        });
+        };
         // The orchestrator: 12 s cumulative − 10.75 s before − 0.25 s sampler.
-        let f = Figures::from_summary(&s, 10.75).unwrap();
+        let f = Figures::from_summary(&s, 10.75);
         assert_eq!(f.cpu_s["orchestrator"], 1.0);
         assert_eq!(f.cpu_total_s(), 8.0);
         assert_eq!(f.rtf(), 2.5);
@@ -1151,7 +1169,11 @@ mod tests {
         assert_eq!(f.max_parent_range_m, Some(11.25));
         assert_eq!(f.visibility_range_m, Some(12.0));
         assert_eq!(f.min_pair_m, Some(2.5));
-        assert!(Figures::from_summary(&json!({ "sim_time_s": 1.0 }), 0.0).is_err());
+        // A summary.json that lacks a figure is refused when read, not read as 0.
+        assert!(serde_json::from_value::<ScaleSummary>(json!({ "sim_time_s": 1.0 })).is_err());
+        // What the benchmark writes reads back whole.
+        let text = serde_json::to_string(&s).unwrap();
+        assert_eq!(serde_json::from_str::<ScaleSummary>(&text).unwrap(), s);
     }
 
     #[test]

@@ -47,17 +47,6 @@ pub fn ned_to_world(p: [f64; 3]) -> [f64; 3] {
     [p[1], p[0], -p[2]]
 }
 
-/// A shoal `[w, x, y, z]` quaternion as a unit nalgebra quaternion
-/// (normalised; `None` if it is zero or not finite).
-pub fn unit_wxyz(q: [f64; 4]) -> Option<UnitQuaternion<f64>> {
-    let raw = NQuat::new(q[0], q[1], q[2], q[3]);
-    let n = raw.norm();
-    if !(n.is_finite() && n > 1e-9) {
-        return None;
-    }
-    Some(UnitQuaternion::from_quaternion(raw))
-}
-
 /// A nalgebra quaternion in Foxglove's `{x, y, z, w}` layout.
 pub fn to_foxglove(q: &UnitQuaternion<f64>) -> Quaternion {
     Quaternion {
@@ -110,6 +99,7 @@ pub fn transform(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::analysis::track::unit_wxyz;
     use approx::assert_relative_eq;
     use nalgebra::Point3;
 

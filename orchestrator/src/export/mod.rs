@@ -48,10 +48,10 @@ use nalgebra::Vector3;
 use shoal_scenario::Scenario;
 
 use foxglove::{FoxgloveMessage, FrameTransforms, Pose, PoseInFrame, SceneUpdate, Time};
-use frames::{
-    body_frame, level_frame, level_rotation, to_foxglove, transform, unit_wxyz, NED_FRAME,
-};
+use frames::{body_frame, level_frame, level_rotation, to_foxglove, transform, NED_FRAME};
 use scene::{ScanView, SlotView, TruePose, VehicleLook};
+
+use crate::analysis::track::{unit_wxyz, Track};
 
 /// Arguments of `shoal export`.
 #[derive(Debug, clap::Args)]
@@ -394,28 +394,12 @@ fn parse_topic(topic: &str) -> Option<(&str, Channel)> {
         .map(|c| (vehicle, c))
 }
 
-/// One vehicle's true poses so far, in time order.
-#[derive(Default)]
-struct Track {
-    times: Vec<u64>,
-    poses: Vec<TruePose>,
-}
-
-impl Track {
-    /// The latest pose at or before `t`.
-    fn at(&self, t: u64) -> Option<&TruePose> {
-        let n = self.times.partition_point(|x| *x <= t);
-        n.checked_sub(1).map(|i| &self.poses[i])
-    }
-}
-
-fn true_pose(s: &Truth) -> Option<TruePose> {
-    let position = Vector3::from(s.position_ned_m);
-    let attitude = unit_wxyz(s.q_body_to_ned_wxyz)?;
-    position
-        .iter()
-        .all(|x| x.is_finite())
-        .then_some(TruePose { position, attitude })
+/// The true pose of `track` at its last sample at or before `t`.
+fn pose_at(track: &Track, t: u64) -> Option<TruePose> {
+    track.latest(t).map(|i| TruePose {
+        position: track.p[i],
+        attitude: track.q[i],
+    })
 }
 
 fn finite(v: &[f64]) -> bool {
@@ -501,8 +485,14 @@ fn export_foxglove<W: std::io::Write + std::io::Seek>(
                     skipped += 1;
                     continue;
                 };
-                let Some(pose) = true_pose(&s) else {
+                let track = tracks
+                    .entry(vehicle.clone())
+                    .or_insert_with(|| Track::new(vehicle));
+                if !track.push(&s) {
                     skipped += 1;
+                    continue;
+                }
+                let Some(pose) = pose_at(track, s.header.sim_time_ns) else {
                     continue;
                 };
                 let t = s.header.sim_time_ns;
@@ -534,9 +524,6 @@ fn export_foxglove<W: std::io::Write + std::io::Seek>(
                         },
                     },
                 )?;
-                let track = tracks.entry(vehicle.clone()).or_default();
-                track.times.push(t);
-                track.poses.push(pose);
             }
             Channel::Sonar => {
                 let Some(s) = recordings::decode::<Sonar>(&m.data) else {
@@ -574,8 +561,8 @@ fn export_foxglove<W: std::io::Write + std::io::Seek>(
                 };
                 let t = s.header.origin_sim_time_ns;
                 let (Some(me), Some(them)) = (
-                    tracks.get(vehicle).and_then(|k| k.at(t)),
-                    tracks.get(parent).and_then(|k| k.at(t)),
+                    tracks.get(vehicle).and_then(|k| pose_at(k, t)),
+                    tracks.get(parent).and_then(|k| pose_at(k, t)),
                 ) else {
                     continue;
                 };
@@ -614,8 +601,8 @@ fn export_foxglove<W: std::io::Write + std::io::Seek>(
                 }
                 let t = s.header.sim_time_ns;
                 let (Some(me), Some(them)) = (
-                    tracks.get(vehicle).and_then(|k| k.at(t)),
-                    tracks.get(parent).and_then(|k| k.at(t)),
+                    tracks.get(vehicle).and_then(|k| pose_at(k, t)),
+                    tracks.get(parent).and_then(|k| pose_at(k, t)),
                 ) else {
                     continue;
                 };
@@ -633,8 +620,8 @@ fn export_foxglove<W: std::io::Write + std::io::Seek>(
                         vehicle,
                         parent,
                         &slot,
-                        me,
-                        them,
+                        &me,
+                        &them,
                     )],
                 };
                 out.write("/scene/slots", m.log_time, &update)?;

@@ -127,7 +127,7 @@ fn verify(o: &GenOptions) -> Scenario {
     let mut s = Scenario::from_toml(&text).unwrap_or_else(|e| panic!("{o:?}: {e}"));
     assert_eq!(s.vehicles.len(), o.vehicles);
     let given: Vec<_> = s.vehicles.iter().map(|v| (v.d_a_m, v.d_b_m)).collect();
-    crate::check::resolve(&mut s).unwrap_or_else(|e| panic!("{o:?}: check refuses: {e:#}"));
+    crate::preflight::resolve(&mut s).unwrap_or_else(|e| panic!("{o:?}: check refuses: {e:#}"));
     let resolved: Vec<_> = s.vehicles.iter().map(|v| (v.d_a_m, v.d_b_m)).collect();
     assert_eq!(given, resolved, "check keeps the generated D_a/D_b");
     let depth = tree_depth(&s);

@@ -14,9 +14,16 @@ use ipc_types::{Clock, EventKind, Header, RunChannel};
 use shoal_runtime::{ChannelLimits, Mode, Publisher};
 use shoal_scenario::{ProcessKind, ProcessSpec, Scenario};
 
-use crate::recovery::{Happening, Journal, Launch, Recovery};
-use crate::supervisor::{Death, Supervisor};
-use crate::sys;
+pub mod os;
+pub mod restart;
+pub mod settings;
+pub mod supervisor;
+
+pub use settings::{bin_dir_or_default, RunSettings};
+
+use os as sys;
+use restart::{Happening, Journal, Launch, Recovery};
+use supervisor::{Death, Supervisor};
 
 /// Options of one run.
 #[derive(Debug, Clone)]

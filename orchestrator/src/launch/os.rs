@@ -1,4 +1,6 @@
-//! The few POSIX calls the supervisor needs, each wrapped once.
+//! The operating system, each call wrapped once: what the supervisor needs
+//! (spawn, reap, signal, CPU time, file limits) and what pre-flight reads
+//! of the machine's limits (statvfs, rlimits, the pids cgroup, /proc).
 #![allow(unsafe_code)]
 
 use std::os::unix::process::CommandExt;
@@ -164,4 +166,91 @@ pub fn load_average() -> Option<f64> {
         .next()?
         .parse()
         .ok()
+}
+
+// The machine limits of pre-flight (`preflight::resources`).
+
+/// Free bytes and free inodes of a file system, for an unprivileged user.
+pub fn statvfs_free(path: &str) -> (Option<u64>, Option<u64>) {
+    let Ok(c) = std::ffi::CString::new(path) else {
+        return (None, None);
+    };
+    // SAFETY: an all-zero statvfs is a valid value; statvfs fills it.
+    let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+    // SAFETY: a NUL-terminated path and a pointer to a local.
+    if unsafe { libc::statvfs(c.as_ptr(), &mut st) } != 0 {
+        return (None, None);
+    }
+    let bytes = (st.f_bavail as u64).saturating_mul(st.f_frsize as u64);
+    // A file system without inode accounting (tmpfs with nr_inodes=0) reports 0 files.
+    let files = (st.f_files != 0).then_some(st.f_favail as u64);
+    (Some(bytes), files)
+}
+
+fn soft_limit(resource: libc::__rlimit_resource_t) -> Option<u64> {
+    let mut r = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: a pointer to a local.
+    if unsafe { libc::getrlimit(resource, &mut r) } != 0 || r.rlim_cur == libc::RLIM_INFINITY {
+        return None;
+    }
+    Some(r.rlim_cur)
+}
+
+/// `RLIMIT_NOFILE` (soft), `None` if unlimited.
+pub fn nofile_limit() -> Option<u64> {
+    soft_limit(libc::RLIMIT_NOFILE)
+}
+
+/// `RLIMIT_NPROC` (soft) and the effective uid.
+pub fn nproc_limit() -> (Option<u64>, u32) {
+    // SAFETY: geteuid has no memory effects.
+    let uid = unsafe { libc::geteuid() };
+    (soft_limit(libc::RLIMIT_NPROC), uid)
+}
+
+/// `pids.max` and `pids.current` of this process's pids cgroup, if limited.
+pub fn pids_cgroup() -> Option<(u64, u64, String)> {
+    let text = std::fs::read_to_string("/proc/self/cgroup").ok()?;
+    for line in text.lines() {
+        let mut parts = line.splitn(3, ':');
+        let (_, ctrl, path) = (parts.next()?, parts.next()?, parts.next()?);
+        let dir = if ctrl == "pids" {
+            format!("/sys/fs/cgroup/pids{path}")
+        } else if ctrl.is_empty() {
+            format!("/sys/fs/cgroup{path}")
+        } else {
+            continue;
+        };
+        let max = std::fs::read_to_string(format!("{dir}/pids.max")).ok();
+        let Some(max) = max.and_then(|m| m.trim().parse::<u64>().ok()) else {
+            continue;
+        };
+        let current = std::fs::read_to_string(format!("{dir}/pids.current"))
+            .ok()
+            .and_then(|c| c.trim().parse::<u64>().ok())
+            .unwrap_or(0);
+        return Some((max, current, dir));
+    }
+    None
+}
+
+/// Processes owned by `uid` (entries of /proc owned by it).
+pub fn user_processes(uid: u32) -> u64 {
+    use std::os::unix::fs::MetadataExt;
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return 0;
+    };
+    entries
+        .flatten()
+        .filter(|e| {
+            e.file_name()
+                .to_string_lossy()
+                .bytes()
+                .all(|b| b.is_ascii_digit())
+        })
+        .filter(|e| e.metadata().is_ok_and(|m| m.uid() == uid))
+        .count() as u64
 }

@@ -25,8 +25,8 @@ use shoal_runtime::{ChannelLimits, Mode, Publisher, Subscriber};
 use shoal_scenario::faults::Policy;
 use shoal_scenario::{ProcessKind, ProcessSpec, Scenario};
 
-use crate::supervisor::{Death, Supervisor};
-use crate::sys::ExitInfo;
+use super::os::ExitInfo;
+use super::supervisor::{Death, Supervisor};
 
 /// How every process of a run is started (and started again).
 #[derive(Debug, Clone)]

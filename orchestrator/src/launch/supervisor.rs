@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use shoal_scenario::ProcessSpec;
 
-use crate::sys::{self, ExitInfo};
+use super::os::{self as sys, ExitInfo};
 
 /// One child process.
 #[derive(Debug)]

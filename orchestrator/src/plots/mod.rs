@@ -15,13 +15,16 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use anyhow::Context;
-use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
+use nalgebra::{Point3, Vector3};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::full_palette::{GREY_300, GREY_500, GREY_700, ORANGE_100};
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use recordings::Recording;
+
+use crate::analysis::formation::{slot_errors, Passage};
+use crate::analysis::track::{Track, Tracks};
 use shoal_scenario::Scenario;
 
 /// Figure names (file stems), in the order they are written.
@@ -43,8 +46,6 @@ const HEIGHT: u32 = 900;
 const MARGIN: u32 = 20;
 const X_LABEL_AREA: u32 = 70;
 const Y_LABEL_AREA: u32 = 90;
-/// Largest gap between a time and the sample used for it, ns.
-const MAX_GAP_NS: u64 = 250_000_000;
 
 /// Vehicle colours: the leader black, then the tab10 palette.
 const VEHICLE_COLOURS: [RGBColor; 10] = [
@@ -140,31 +141,11 @@ pub(crate) fn register_font() -> anyhow::Result<()> {
     .map_err(anyhow::Error::msg)
 }
 
-/// One vehicle's true trajectory.
-struct Track {
-    name: String,
-    t_ns: Vec<u64>,
-    p: Vec<Vector3<f64>>,
-    q: Vec<UnitQuaternion<f64>>,
-}
-
-impl Track {
-    /// Index of the last sample at or before `t`, if it is recent enough.
-    fn at(&self, t: u64) -> Option<usize> {
-        let i = match self.t_ns.binary_search(&t) {
-            Ok(i) => i,
-            Err(0) => return None,
-            Err(i) => i - 1,
-        };
-        (t - self.t_ns[i] <= MAX_GAP_NS).then_some(i)
-    }
-}
-
 /// A follower with its parent and slot (parent body frame, FRD, m).
 struct Follower {
     track: usize,
     parent: usize,
-    slot: Vector3<f64>,
+    slot: [f64; 3],
 }
 
 /// Everything the figures need, loaded once.
@@ -186,30 +167,7 @@ fn secs(ns: u64) -> f64 {
 
 impl Data {
     fn load(scenario: &Scenario, rec: &Recording) -> anyhow::Result<Self> {
-        let tracks: Vec<Track> = scenario
-            .vehicles
-            .iter()
-            .map(|v| {
-                let mut truths = rec.samples::<ipc_types::Truth>(&format!("/{}/truth", v.name));
-                truths.sort_by_key(|s| s.header.sim_time_ns);
-                let [w, x, y, z] = [0, 1, 2, 3];
-                Track {
-                    name: v.name.clone(),
-                    t_ns: truths.iter().map(|s| s.header.sim_time_ns).collect(),
-                    p: truths
-                        .iter()
-                        .map(|s| Vector3::from(s.position_ned_m))
-                        .collect(),
-                    q: truths
-                        .iter()
-                        .map(|s| {
-                            let q = s.q_body_to_ned_wxyz;
-                            UnitQuaternion::from_quaternion(Quaternion::new(q[w], q[x], q[y], q[z]))
-                        })
-                        .collect(),
-                }
-            })
-            .collect();
+        let tracks = Tracks::load(scenario, rec).tracks;
         let followers = scenario
             .vehicles
             .iter()
@@ -219,7 +177,7 @@ impl Data {
                 Some(Follower {
                     track: i,
                     parent,
-                    slot: Vector3::from(v.slot_m?),
+                    slot: v.slot_m?,
                 })
             })
             .collect::<Vec<_>>();
@@ -232,43 +190,12 @@ impl Data {
             Some(sonar::ObstacleField::new(&obstacles).context("obstacle field")?)
         };
 
-        // Avoidance intervals: runs of planner_state.avoiding == 1, merged
-        // over all followers.
-        let mut spans: Vec<(u64, u64)> = Vec::new();
-        for f in &followers {
-            let mut states = rec.samples::<ipc_types::PlannerState>(&format!(
-                "/{}/planner_state",
-                tracks[f.track].name
-            ));
-            states.sort_by_key(|s| s.header.sim_time_ns);
-            let mut start: Option<u64> = None;
-            let mut last = 0;
-            for s in &states {
-                let t = s.header.sim_time_ns;
-                match (s.avoiding != 0, start) {
-                    (true, None) => start = Some(t),
-                    (false, Some(t0)) => {
-                        spans.push((t0, t));
-                        start = None;
-                    }
-                    _ => {}
-                }
-                last = t;
-            }
-            if let Some(t0) = start {
-                spans.push((t0, last));
-            }
-        }
-        spans.sort_unstable();
-        let mut avoiding_s: Vec<(f64, f64)> = Vec::new();
-        let mut merged: Vec<(u64, u64)> = Vec::new();
-        for (a, b) in spans {
-            match merged.last_mut() {
-                Some(m) if a <= m.1 => m.1 = m.1.max(b),
-                _ => merged.push((a, b)),
-            }
-        }
-        avoiding_s.extend(merged.iter().map(|&(a, b)| (secs(a), secs(b))));
+        // Avoidance intervals: when any follower was shifting for an obstacle.
+        let avoiding_s = Passage::load(scenario, rec)
+            .spans
+            .iter()
+            .map(|s| (secs(s.start_ns), secs(s.end_ns)))
+            .collect();
 
         let t_end_s = tracks
             .iter()
@@ -340,7 +267,7 @@ impl Data {
                     .t_ns
                     .iter()
                     .filter_map(|&t| {
-                        let (ia, ib) = (a.at(t)?, b.at(t)?);
+                        let (ia, ib) = (a.recent(t)?, b.recent(t)?);
                         Some((secs(t), (a.p[ia] - b.p[ib]).norm()))
                     })
                     .collect();
@@ -352,15 +279,9 @@ impl Data {
 
     /// Slot error of a follower over time: `|p − (p_parent + R_parent·slot)|`.
     fn slot_error(&self, f: &Follower) -> Vec<(f64, f64)> {
-        let (tf, tp) = (&self.tracks[f.track], &self.tracks[f.parent]);
-        tf.t_ns
-            .iter()
-            .enumerate()
-            .filter_map(|(i, &t)| {
-                let j = tp.at(t)?;
-                let target = tp.p[j] + tp.q[j] * f.slot;
-                Some((secs(t), (tf.p[i] - target).norm()))
-            })
+        slot_errors(&self.tracks[f.track], &self.tracks[f.parent], f.slot)
+            .into_iter()
+            .map(|(t, e)| (secs(t), e))
             .collect()
     }
 }

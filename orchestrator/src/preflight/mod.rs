@@ -1,9 +1,13 @@
-//! `shoal check`: every section of a scenario parsed into its service's
+//! Pre-flight (`shoal check`, and every run before it starts): every section of a scenario parsed into its service's
 //! typed config and validated, the start checked (no vehicle inside an
 //! obstacle or too close to another, every camera sees its parent), the
 //! formation's displacement trajectories (D_a, D_b) assigned and checked,
-//! and what the run needs from the machine ([`needs`]) compared with what
-//! it has ([`fits`]), before anything starts.
+//! and what the run needs from the machine ([`resources::needs`]) compared
+//! with what it has ([`resources::fits`]), before anything starts.
+
+pub mod resources;
+
+pub use resources::{fits, needs};
 
 use std::collections::BTreeMap;
 
@@ -11,11 +15,20 @@ use anyhow::Context;
 use camera_pose::{BeaconStatus, Camera, Capsule};
 use nalgebra::{Isometry3, Vector3};
 use planner::formation::{FollowerSlot, FormationParams};
-use shoal_runtime::domain::ChannelLimits;
-use shoal_scenario::{Perception, ProcessKind, Scenario};
+use shoal_scenario::{Perception, Scenario};
 
 // The scenario crate cannot see ipc-types; the two limits must agree.
 const _: () = assert!(shoal_scenario::MAX_VEHICLES == ipc_types::MAX_VEHICLES);
+
+/// The scenario at `path`, or the embedded paper scenario.
+pub fn load_scenario(path: &Option<std::path::PathBuf>) -> anyhow::Result<Scenario> {
+    match path {
+        Some(p) => {
+            Scenario::from_file(p).with_context(|| format!("scenario {} refused", p.display()))
+        }
+        None => Scenario::paper().context("the embedded paper scenario is invalid"),
+    }
+}
 
 /// Validates the whole scenario and fills in every follower's D_a and D_b
 /// (those the file leaves out are assigned from the formation); the error
@@ -264,358 +277,10 @@ fn describe(status: BeaconStatus, camera: &camera_pose::CameraConfig) -> String 
     }
 }
 
-/// What a run of a scenario needs from the machine, estimated from its
-/// topology before anything starts (`shoal check` prints it).
-///
-/// The shared-memory and file-descriptor models were fitted to a measured
-/// run of the paper scenario (iceoryx2 0.10, 5 vehicles, 26 processes: 72
-/// services, 258 files in `/dev/shm` holding 4.0 MB, at most 307 open files
-/// in one process, the recorder) and err on the high side.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-pub struct Needs {
-    /// Processes: the service processes plus the orchestrator.
-    pub processes: u64,
-    /// iceoryx2 services: every vehicle channel, world, clock, done, and one
-    /// wake event per process.
-    pub services: u64,
-    /// Bytes of `/dev/shm`: each publisher's data segment (sample size ×
-    /// slots), each service's dynamic segment, each connection.
-    pub shm_bytes: u64,
-    /// Files in `/dev/shm`.
-    pub shm_files: u64,
-    /// Most file descriptors one process holds (the recorder, which opens
-    /// every channel, or the orchestrator, which opens every wake event).
-    pub open_files: u64,
-}
-
-/// Bytes of one publisher's data segment in iceoryx2 0.10: a slot per
-/// sample that can be in flight (every subscriber's buffer plus two
-/// borrowed each, the history, two loans, one spare), each the sample plus
-/// 52 bytes of management, plus ~150 bytes (fitted to measured segments:
-/// 448 B × 165 slots → 82 650 B; 20 528 B × 93 slots → 1 914 090 B).
-fn data_segment_bytes(sample: usize, limits: &ChannelLimits) -> u64 {
-    let slots = limits.max_subscribers * (limits.max_buffer + 2) + limits.history + 3;
-    150 + (slots as u64) * (sample as u64 + 52)
-}
-
-/// Bytes of one service's dynamic segment (port and node tables); an upper
-/// bound of the measured 2.1-5.8 KB.
-fn dynamic_segment_bytes(limits: &ChannelLimits) -> u64 {
-    1024 + 96 * (limits.max_publishers + limits.max_subscribers + limits.max_nodes) as u64
-}
-
-/// Bytes of one publisher→subscriber connection (measured 0.4-1 KB).
-const CONNECTION_BYTES: u64 = 1024;
-
-/// Open files of one process: a base (node, logs, libraries) plus a few per
-/// service it opens (static config, port tag, dynamic segment, data
-/// segment, connection). Fitted to the measured run: 8 services → 112
-/// files, 47 services → 307.
-fn open_files_of(services: u64) -> u64 {
-    80 + 6 * services
-}
-
-/// Estimates what a run of `s` needs (see [`Needs`]).
-pub fn needs(s: &Scenario) -> Needs {
-    let procs = s.processes();
-    let n_procs = procs.len() as u64;
-    let vehicles = s.vehicles.len();
-    let followers = s.vehicles.iter().filter(|v| v.parent.is_some()).count();
-    let sizes = |c: ipc_types::Channel| -> usize {
-        use ipc_types::Channel as C;
-        match c {
-            C::Truth => std::mem::size_of::<ipc_types::Truth>(),
-            C::Nav => std::mem::size_of::<ipc_types::Nav>(),
-            C::Thrust => std::mem::size_of::<ipc_types::Thrust>(),
-            C::Sonar => std::mem::size_of::<ipc_types::Sonar>(),
-            C::Beacons => std::mem::size_of::<ipc_types::Beacons>(),
-            C::LeaderPose => std::mem::size_of::<ipc_types::LeaderPose>(),
-            C::Setpoint => std::mem::size_of::<ipc_types::Setpoint>(),
-            C::PlannerState => std::mem::size_of::<ipc_types::PlannerState>(),
-            C::MpcStats => std::mem::size_of::<ipc_types::MpcStats>(),
-        }
-    };
-    let vlim = ChannelLimits::vehicle();
-    let wlim = ChannelLimits::world(vehicles);
-    let clim = ChannelLimits::clock(procs.len());
-    let dlim = ChannelLimits::done(procs.len());
-    let wake = ChannelLimits {
-        max_publishers: 2,
-        max_subscribers: 2,
-        max_nodes: 4,
-        max_buffer: 1,
-        history: 0,
-    };
-    let mut shm: u64 = 0;
-    let mut files: u64 = 1; // the domain's global management segment
-    let mut vehicle_channels: u64 = 0;
-    for v in &s.vehicles {
-        for c in ipc_types::Channel::ALL {
-            if c.follower_only() && v.parent.is_none() {
-                continue;
-            }
-            vehicle_channels += 1;
-            shm += data_segment_bytes(sizes(c), &vlim) + dynamic_segment_bytes(&vlim);
-            files += 2;
-        }
-    }
-    // world and clock: pub-sub with a data segment each; done: an event.
-    shm += data_segment_bytes(std::mem::size_of::<ipc_types::World>(), &wlim)
-        + dynamic_segment_bytes(&wlim);
-    shm += data_segment_bytes(std::mem::size_of::<ipc_types::Clock>(), &clim)
-        + dynamic_segment_bytes(&clim);
-    shm += dynamic_segment_bytes(&dlim) + 1024;
-    files += 2 + 2 + 2;
-    // one wake event per process: dynamic + event management segments.
-    shm += n_procs * (dynamic_segment_bytes(&wake) + 1024);
-    files += 2 * n_procs;
-    // Connections: the recorder reads every vehicle channel; the consumers
-    // of each vehicle (world ← truth; planner and mpc ← nav; plant ← thrust;
-    // planner ← sonar, leader_pose; mpc ← setpoint) about seven more; every
-    // camera, sonar and the recorder read the world; every process the clock.
-    let sensors = (vehicles + followers) as u64;
-    let connections = vehicle_channels + 7 * vehicles as u64 + sensors + 1 + n_procs;
-    shm += connections * CONNECTION_BYTES;
-    files += connections;
-    let services = vehicle_channels + 3 + n_procs;
-    let recorder_services = vehicle_channels + 4;
-    let orchestrator_services = n_procs + 2;
-    let world_services = vehicles as u64 + 4;
-    let busiest = recorder_services
-        .max(orchestrator_services)
-        .max(world_services);
-    debug_assert!(procs.iter().any(|p| p.kind == ProcessKind::Recorder));
-    Needs {
-        processes: n_procs + 1,
-        services,
-        shm_bytes: shm,
-        shm_files: files,
-        open_files: open_files_of(busiest),
-    }
-}
-
-/// What the machine allows right now; `None` where there is no limit or it
-/// cannot be read.
-#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
-pub struct Limits {
-    /// Processes that can still be started, and which limit says so.
-    pub processes: Option<(u64, String)>,
-    /// Free bytes in `/dev/shm` (statvfs, for an unprivileged user).
-    pub shm_free_bytes: Option<u64>,
-    /// Free inodes in `/dev/shm`.
-    pub shm_free_files: Option<u64>,
-    /// `RLIMIT_NOFILE` (soft) that the run's processes inherit.
-    pub open_files: Option<u64>,
-}
-
-/// Reads the machine's limits: statvfs(`/dev/shm`), `RLIMIT_NOFILE`, and
-/// for processes the least of `kernel.pid_max` / `kernel.threads-max` minus
-/// the tasks alive, the pids cgroup (v1 or v2), and `RLIMIT_NPROC` minus
-/// this user's processes (not for root, whom the kernel exempts).
-pub fn machine_limits() -> Limits {
-    let (shm_free_bytes, shm_free_files) = os::statvfs_free("/dev/shm");
-    let mut procs: Option<(u64, String)> = None;
-    let mut consider = |free: u64, what: String| {
-        if procs.as_ref().is_none_or(|(f, _)| free < *f) {
-            procs = Some((free, what));
-        }
-    };
-    let read_u64 =
-        |p: &str| -> Option<u64> { std::fs::read_to_string(p).ok()?.trim().parse().ok() };
-    // Tasks alive: the 4th field of /proc/loadavg is running/total.
-    let tasks = std::fs::read_to_string("/proc/loadavg")
-        .ok()
-        .and_then(|t| {
-            t.split_whitespace()
-                .nth(3)?
-                .split('/')
-                .nth(1)?
-                .parse::<u64>()
-                .ok()
-        })
-        .unwrap_or(0);
-    for (path, what) in [
-        ("/proc/sys/kernel/pid_max", "kernel.pid_max"),
-        ("/proc/sys/kernel/threads-max", "kernel.threads-max"),
-    ] {
-        if let Some(max) = read_u64(path) {
-            consider(
-                max.saturating_sub(tasks),
-                format!("{what} = {max} with {tasks} tasks alive"),
-            );
-        }
-    }
-    if let Some((max, current, path)) = pids_cgroup() {
-        consider(
-            max.saturating_sub(current),
-            format!("the pids cgroup {path}: pids.max = {max}, {current} in use"),
-        );
-    }
-    let (nproc, uid) = os::nproc_limit();
-    if let (Some(max), true) = (nproc, uid != 0) {
-        let mine = user_processes(uid);
-        consider(
-            max.saturating_sub(mine),
-            format!("RLIMIT_NPROC = {max} with {mine} processes of uid {uid}"),
-        );
-    }
-    Limits {
-        processes: procs,
-        shm_free_bytes,
-        shm_free_files,
-        open_files: os::nofile_limit(),
-    }
-}
-
-/// `pids.max` and `pids.current` of this process's pids cgroup, if limited.
-fn pids_cgroup() -> Option<(u64, u64, String)> {
-    let text = std::fs::read_to_string("/proc/self/cgroup").ok()?;
-    for line in text.lines() {
-        let mut parts = line.splitn(3, ':');
-        let (_, ctrl, path) = (parts.next()?, parts.next()?, parts.next()?);
-        let dir = if ctrl == "pids" {
-            format!("/sys/fs/cgroup/pids{path}")
-        } else if ctrl.is_empty() {
-            format!("/sys/fs/cgroup{path}")
-        } else {
-            continue;
-        };
-        let max = std::fs::read_to_string(format!("{dir}/pids.max")).ok();
-        let Some(max) = max.and_then(|m| m.trim().parse::<u64>().ok()) else {
-            continue;
-        };
-        let current = std::fs::read_to_string(format!("{dir}/pids.current"))
-            .ok()
-            .and_then(|c| c.trim().parse::<u64>().ok())
-            .unwrap_or(0);
-        return Some((max, current, dir));
-    }
-    None
-}
-
-/// Processes owned by `uid` (entries of /proc owned by it).
-fn user_processes(uid: u32) -> u64 {
-    use std::os::unix::fs::MetadataExt;
-    let Ok(entries) = std::fs::read_dir("/proc") else {
-        return 0;
-    };
-    entries
-        .flatten()
-        .filter(|e| {
-            e.file_name()
-                .to_string_lossy()
-                .bytes()
-                .all(|b| b.is_ascii_digit())
-        })
-        .filter(|e| e.metadata().is_ok_and(|m| m.uid() == uid))
-        .count() as u64
-}
-
-/// Refuses a run that this machine cannot hold (see [`needs`], [`machine_limits`]).
-pub fn fits(n: &Needs) -> anyhow::Result<()> {
-    fits_within(n, &machine_limits())
-}
-
-/// [`fits`] against given limits. The message names `vehicles` (the size
-/// of the group is what drives every figure) and the limit.
-pub fn fits_within(n: &Needs, l: &Limits) -> anyhow::Result<()> {
-    if let Some((free, what)) = &l.processes {
-        if n.processes > *free {
-            anyhow::bail!(
-                "vehicles: the run needs {} processes, but only {free} more can start here ({what})",
-                n.processes
-            );
-        }
-    }
-    if let Some(free) = l.shm_free_bytes {
-        if n.shm_bytes > free {
-            anyhow::bail!(
-                "vehicles: the run needs about {:.1} MiB of /dev/shm for {} iceoryx2 services, \
-                 but only {:.1} MiB are free",
-                n.shm_bytes as f64 / 1048576.0,
-                n.services,
-                free as f64 / 1048576.0
-            );
-        }
-    }
-    if let Some(free) = l.shm_free_files {
-        if n.shm_files > free {
-            anyhow::bail!(
-                "vehicles: the run needs about {} files in /dev/shm, but only {free} inodes are free",
-                n.shm_files
-            );
-        }
-    }
-    if let Some(max) = l.open_files {
-        if n.open_files > max {
-            anyhow::bail!(
-                "vehicles: one process of the run (the recorder) needs about {} open files for \
-                 {} iceoryx2 services, but RLIMIT_NOFILE is {max} (raise it with `ulimit -n`)",
-                n.open_files,
-                n.services
-            );
-        }
-    }
-    Ok(())
-}
-
-/// The three POSIX queries [`machine_limits`] needs, each wrapped once.
-#[allow(unsafe_code)]
-mod os {
-    /// Free bytes and free inodes of a file system, for an unprivileged user.
-    pub fn statvfs_free(path: &str) -> (Option<u64>, Option<u64>) {
-        let Ok(c) = std::ffi::CString::new(path) else {
-            return (None, None);
-        };
-        // SAFETY: an all-zero statvfs is a valid value; statvfs fills it.
-        let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
-        // SAFETY: a NUL-terminated path and a pointer to a local.
-        if unsafe { libc::statvfs(c.as_ptr(), &mut st) } != 0 {
-            return (None, None);
-        }
-        let bytes = (st.f_bavail as u64).saturating_mul(st.f_frsize as u64);
-        // A file system without inode accounting (tmpfs with nr_inodes=0) reports 0 files.
-        let files = (st.f_files != 0).then_some(st.f_favail as u64);
-        (Some(bytes), files)
-    }
-
-    fn soft_limit(resource: libc::__rlimit_resource_t) -> Option<u64> {
-        let mut r = libc::rlimit {
-            rlim_cur: 0,
-            rlim_max: 0,
-        };
-        // SAFETY: a pointer to a local.
-        if unsafe { libc::getrlimit(resource, &mut r) } != 0 || r.rlim_cur == libc::RLIM_INFINITY {
-            return None;
-        }
-        Some(r.rlim_cur)
-    }
-
-    /// `RLIMIT_NOFILE` (soft), `None` if unlimited.
-    pub fn nofile_limit() -> Option<u64> {
-        soft_limit(libc::RLIMIT_NOFILE)
-    }
-
-    /// `RLIMIT_NPROC` (soft) and the effective uid.
-    pub fn nproc_limit() -> (Option<u64>, u32) {
-        // SAFETY: geteuid has no memory effects.
-        let uid = unsafe { libc::geteuid() };
-        (soft_limit(libc::RLIMIT_NPROC), uid)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
     use super::*;
-
-    /// Measured on a live run of the paper scenario (iceoryx2 0.10, this
-    /// repository's limits): 72 services in the domain, 258 files in
-    /// /dev/shm holding 4 014 828 bytes, 307 open files in the recorder.
-    const PAPER_SERVICES: u64 = 72;
-    const PAPER_SHM_FILES: u64 = 258;
-    const PAPER_SHM_BYTES: u64 = 4_014_828;
-    const PAPER_RECORDER_FILES: u64 = 307;
 
     #[test]
     fn a_deep_tree_without_headway_is_warned_about_and_the_paper_is_not() {
@@ -641,102 +306,6 @@ mod tests {
         assert_eq!(said.len(), 1, "{said:?}");
         assert!(said[0].contains("3 levels deep"), "{said:?}");
         assert!(advice(&chain("[follower]\nheadway_s = 1.0\n")).is_empty());
-    }
-
-    #[test]
-    fn paper_needs_match_a_measured_run_and_err_high() {
-        let s = Scenario::paper().unwrap();
-        let n = needs(&s);
-        assert_eq!(n.processes, s.processes().len() as u64 + 1);
-        assert_eq!(n.services, PAPER_SERVICES);
-        assert!(
-            (PAPER_SHM_BYTES..2 * PAPER_SHM_BYTES).contains(&n.shm_bytes),
-            "{n:?}"
-        );
-        assert!(
-            (PAPER_SHM_FILES..2 * PAPER_SHM_FILES).contains(&n.shm_files),
-            "{n:?}"
-        );
-        assert!(
-            (PAPER_RECORDER_FILES..2 * PAPER_RECORDER_FILES).contains(&n.open_files),
-            "{n:?}"
-        );
-    }
-
-    #[test]
-    fn needs_grow_with_the_group() {
-        let small = needs(&Scenario::paper().unwrap());
-        let mut s = Scenario::paper().unwrap();
-        let template = s.vehicles[1].clone();
-        for i in 0..20 {
-            let mut v = template.clone();
-            v.name = format!("X{i}");
-            s.vehicles.push(v);
-        }
-        let big = needs(&s);
-        assert!(big.processes > small.processes && big.services > small.services);
-        assert!(big.shm_bytes > small.shm_bytes && big.open_files > small.open_files);
-    }
-
-    #[test]
-    fn each_machine_limit_refuses_and_is_named() {
-        let n = needs(&Scenario::paper().unwrap());
-        let roomy = Limits {
-            processes: Some((n.processes, "test".into())),
-            shm_free_bytes: Some(n.shm_bytes),
-            shm_free_files: Some(n.shm_files),
-            open_files: Some(n.open_files),
-        };
-        fits_within(&n, &roomy).unwrap();
-        let unknown = Limits {
-            processes: None,
-            shm_free_bytes: None,
-            shm_free_files: None,
-            open_files: None,
-        };
-        fits_within(&n, &unknown).unwrap();
-        let cases = [
-            (
-                Limits {
-                    processes: Some((n.processes - 1, "the pids cgroup".into())),
-                    ..roomy.clone()
-                },
-                "the pids cgroup",
-            ),
-            (
-                Limits {
-                    shm_free_bytes: Some(n.shm_bytes - 1),
-                    ..roomy.clone()
-                },
-                "MiB of /dev/shm",
-            ),
-            (
-                Limits {
-                    shm_free_files: Some(n.shm_files - 1),
-                    ..roomy.clone()
-                },
-                "inodes",
-            ),
-            (
-                Limits {
-                    open_files: Some(n.open_files - 1),
-                    ..roomy.clone()
-                },
-                "RLIMIT_NOFILE",
-            ),
-        ];
-        for (limits, word) in cases {
-            let e = fits_within(&n, &limits).unwrap_err().to_string();
-            assert!(e.starts_with("vehicles: ") && e.contains(word), "{e}");
-        }
-    }
-
-    #[test]
-    fn this_machine_reports_its_limits() {
-        let l = machine_limits();
-        // /dev/shm exists on every Linux machine this runs on.
-        assert!(l.shm_free_bytes.is_some(), "{l:?}");
-        assert!(l.processes.is_some(), "{l:?}");
     }
 
     /// Byte ranges of the numbers in `text` (not inside names).

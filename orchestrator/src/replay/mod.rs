@@ -15,15 +15,14 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
-use ipc_types::schema::{FieldDesc, TypeDesc};
 use ipc_types::{Header, Sample};
 use recordings::Recording;
 use shoal_runtime::{ChannelLimits, Mode, Publisher, Subscriber};
 use shoal_scenario::{ProcessKind, ProcessSpec, Scenario};
 
-use crate::run::{wait_done, wait_ready, Ports};
-use crate::supervisor::Supervisor;
-use crate::sys;
+use crate::launch::os as sys;
+use crate::launch::supervisor::Supervisor;
+use crate::launch::{wait_done, wait_ready, Ports};
 
 /// Arguments of `shoal replay`.
 #[derive(Debug, clap::Args)]
@@ -58,65 +57,6 @@ pub struct ReplayCmd {
     /// Print the re-run's report as JSON.
     #[arg(long)]
     pub json: bool,
-}
-
-/// Evaluates `$body` with `$T` the sample type recorded under `$schema`
-/// (its ros2msg name), or `$other` for a schema shoal does not know.
-macro_rules! with_sample_type {
-    ($schema:expr, $T:ident => $body:expr, else $other:expr) => {{
-        use ipc_types::*;
-        match $schema {
-            "shoal/Truth" => {
-                type $T = Truth;
-                $body
-            }
-            "shoal/Nav" => {
-                type $T = Nav;
-                $body
-            }
-            "shoal/Thrust" => {
-                type $T = Thrust;
-                $body
-            }
-            "shoal/World" => {
-                type $T = World;
-                $body
-            }
-            "shoal/Sonar" => {
-                type $T = Sonar;
-                $body
-            }
-            "shoal/Beacons" => {
-                type $T = Beacons;
-                $body
-            }
-            "shoal/LeaderPose" => {
-                type $T = LeaderPose;
-                $body
-            }
-            "shoal/Setpoint" => {
-                type $T = Setpoint;
-                $body
-            }
-            "shoal/PlannerState" => {
-                type $T = PlannerState;
-                $body
-            }
-            "shoal/MpcStats" => {
-                type $T = MpcStats;
-                $body
-            }
-            "shoal/ProcessStats" => {
-                type $T = ProcessStats;
-                $body
-            }
-            "shoal/Event" => {
-                type $T = Event;
-                $body
-            }
-            _ => $other,
-        }
-    }};
 }
 
 /// A publisher of any recorded sample type, fed raw recorded bytes.
@@ -170,7 +110,7 @@ fn open_publisher(
             publisher: shoal_runtime::node_publisher::<T>(node, service, limits)?,
         }))
     }
-    with_sample_type!(schema, T => typed::<T>(node, service, limits), else bail!("no sample type for schema {schema}"))
+    ipc_types::with_sample_type!(schema, T => typed::<T>(node, service, limits), else bail!("no sample type for schema {schema}"))
 }
 
 /// The recorded run's scenario (resolved, as the processes read it).
@@ -422,14 +362,14 @@ fn rerun(rec: &Recording, cmd: &ReplayCmd, kind_name: &str) -> anyhow::Result<Re
             .context("--vehicle is required to re-run a vehicle's process")?
     };
     let mut scenario = apply_overrides(&base, &cmd.set)?;
-    crate::check::resolve(&mut scenario).context("the re-run's scenario is refused")?;
+    crate::preflight::resolve(&mut scenario).context("the re-run's scenario is refused")?;
     let mut spec: ProcessSpec = scenario
         .processes()
         .into_iter()
         .find(|p| p.kind == kind && p.vehicle == vehicle)
         .with_context(|| format!("no process {kind_name} of vehicle {vehicle} in the scenario"))?;
     spec.index = 0;
-    let bin_dir = crate::bin_dir_or_default(cmd.bin_dir.clone())?;
+    let bin_dir = crate::launch::bin_dir_or_default(cmd.bin_dir.clone())?;
     let binary = bin_dir.join(kind.binary());
     if !binary.is_file() {
         bail!("service binary {} not found", binary.display());
@@ -444,7 +384,7 @@ fn rerun(rec: &Recording, cmd: &ReplayCmd, kind_name: &str) -> anyhow::Result<Re
     let mut ports = Ports::open(&run_id, &procs)?;
     let mut sup = Supervisor::default();
     // The process is started as `shoal run` starts it, alone in its run.
-    let launch = crate::recovery::Launch {
+    let launch = crate::launch::restart::Launch {
         bin_dir: bin_dir.clone(),
         out: dir.clone(),
         run_id: run_id.clone(),
@@ -512,7 +452,7 @@ fn open_tap(
             sub: shoal_runtime::node_subscriber::<T>(node, service, limits, limits.max_buffer)?,
         }))
     }
-    with_sample_type!(schema, T => typed::<T>(node, service, limits), else bail!("no sample type for schema {schema}"))
+    ipc_types::with_sample_type!(schema, T => typed::<T>(node, service, limits), else bail!("no sample type for schema {schema}"))
 }
 
 /// Spawns the process, feeds it tick by tick and compares its outputs.
@@ -629,7 +569,7 @@ fn drive(
                         "none".to_string(),
                         "a sample".to_string(),
                     )),
-                    Some(exp) => first_field_difference(&tap.schema, exp, bytes),
+                    Some(exp) => recordings::first_field_difference(&tap.schema, exp, bytes),
                 };
                 if let Some((field, recorded, rerun)) = d {
                     let header: Header =
@@ -678,122 +618,9 @@ fn drive(
     })
 }
 
-/// The fields of a recorded schema.
-fn fields_of(schema: &str) -> Option<Vec<FieldDesc>> {
-    with_sample_type!(schema, T => Some(<T as ipc_types::Described>::fields()), else None)
-}
-
-/// The first field (in declaration order) whose bytes differ between `a`
-/// and `b`, skipping wall-clock fields: `(path, value in a, value in b)`.
-pub fn first_field_difference(
-    schema: &str,
-    a: &[u8],
-    b: &[u8],
-) -> Option<(String, String, String)> {
-    if a.len() != b.len() {
-        return Some(("(size)".into(), a.len().to_string(), b.len().to_string()));
-    }
-    let Some(fields) = fields_of(schema) else {
-        return (a != b).then(|| ("(bytes)".into(), "…".into(), "…".into()));
-    };
-    fn value(ros: &str, b: &[u8]) -> String {
-        let arr8 = |b: &[u8]| <[u8; 8]>::try_from(b).unwrap_or_default();
-        let arr4 = |b: &[u8]| <[u8; 4]>::try_from(b).unwrap_or_default();
-        match ros {
-            "float64" => format!("{:?}", f64::from_ne_bytes(arr8(b))),
-            "float32" => format!("{:?}", f32::from_ne_bytes(arr4(b))),
-            "uint64" => u64::from_ne_bytes(arr8(b)).to_string(),
-            "int64" => i64::from_ne_bytes(arr8(b)).to_string(),
-            "uint32" => u32::from_ne_bytes(arr4(b)).to_string(),
-            "int32" => i32::from_ne_bytes(arr4(b)).to_string(),
-            _ => format!("{b:02x?}"),
-        }
-    }
-    struct Walk<'a> {
-        a: &'a [u8],
-        b: &'a [u8],
-        off: usize,
-    }
-    fn walk_ty(
-        w: &mut Walk,
-        ty: &TypeDesc,
-        path: String,
-        wall: bool,
-    ) -> Option<(String, String, String)> {
-        match ty {
-            TypeDesc::Primitive { ros, size } => {
-                w.off = w.off.next_multiple_of(*size);
-                let r = w.off..w.off + size;
-                w.off += size;
-                let (x, y) = (w.a.get(r.clone())?, w.b.get(r)?);
-                (!wall && x != y).then(|| (path, value(ros, x), value(ros, y)))
-            }
-            TypeDesc::Nested { fields, .. } => walk(w, &fields(), &path, wall),
-            TypeDesc::Array { elem, len } => {
-                (0..*len).find_map(|i| walk_ty(w, elem, format!("{path}[{i}]"), wall))
-            }
-        }
-    }
-    fn walk(
-        w: &mut Walk,
-        fields: &[FieldDesc],
-        prefix: &str,
-        wall: bool,
-    ) -> Option<(String, String, String)> {
-        for f in fields {
-            let path = if prefix.is_empty() {
-                f.name.to_string()
-            } else {
-                format!("{prefix}.{}", f.name)
-            };
-            let is_wall = wall || ipc_types::schema::is_wall_clock_field(&f.name);
-            if let Some(d) = walk_ty(w, &f.ty, path, is_wall) {
-                return Some(d);
-            }
-        }
-        None
-    }
-    walk(&mut Walk { a, b, off: 0 }, &fields, "", false)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ipc_types::Truth;
-
-    #[test]
-    fn the_first_differing_field_is_named_and_wall_clock_fields_are_ignored() {
-        let mut a = Truth::zeroed();
-        a.position_ned_m = [1.0, 2.0, 3.0];
-        a.velocity_body_mps = [0.5, 0.0, 0.0];
-        let mut b = a;
-        b.header.publish_mono_ns = 99;
-        b.thrust_applied_mono_ns = 7;
-        assert_eq!(
-            first_field_difference(
-                "shoal/Truth",
-                bytemuck::bytes_of(&a),
-                bytemuck::bytes_of(&b)
-            ),
-            None
-        );
-        b.position_ned_m[1] = 2.5;
-        b.velocity_body_mps[0] = 0.6;
-        let d = first_field_difference(
-            "shoal/Truth",
-            bytemuck::bytes_of(&a),
-            bytemuck::bytes_of(&b),
-        )
-        .unwrap();
-        assert_eq!(
-            d,
-            (
-                "position_ned_m[1]".to_string(),
-                "2.0".to_string(),
-                "2.5".to_string()
-            )
-        );
-    }
 
     #[test]
     fn overrides_set_nested_keys_with_toml_values() {

@@ -9,13 +9,13 @@ use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector
 use planner::formation::{assign_displacements, FollowerSlot, FormationParams};
 use planner::{
     FollowerConfig, FollowerInput, FollowerPlanner, LeaderConfig, LeaderInput, LeaderPlanner,
-    PoseMeasurement, SonarReturns,
+    PoseMeasurement, SonarScan,
 };
 
-fn scan(hit: bool) -> SonarReturns {
-    let mut s = SonarReturns {
+fn scan(hit: bool) -> SonarScan {
+    let mut s = SonarScan {
         count: 4,
-        ..SonarReturns::default()
+        ..SonarScan::default()
     };
     for (i, a) in [-30.0f64, -10.0, 10.0, 30.0].iter().enumerate() {
         s.azimuth_rad[i] = a.to_radians();

@@ -9,7 +9,7 @@ use crate::observer::{FixOutcome, ObserverParams, ParentObserver};
 use crate::shift::{beam_vector, Displacement, Shift, SlotFilter};
 use crate::types::{
     cfg_err, check_finite, check_nonneg, check_pos, Mode, PlannerError, PlannerOutput,
-    PlannerState, SonarReturns, Target,
+    PlannerState, SonarScan, Target,
 };
 
 /// Remembered obstacle points (odometry frame).
@@ -239,7 +239,7 @@ pub struct FollowerInput {
     /// A new vision fix this step, if any.
     pub pose: Option<PoseMeasurement>,
     /// A new scan this step, if any.
-    pub sonar: Option<SonarReturns>,
+    pub sonar: Option<SonarScan>,
 }
 
 /// The parent as the observer sees it, in the follower's level frame.

@@ -47,7 +47,7 @@ use crate::nav_filter::PositionFilter;
 use crate::shift::beam_vector;
 use crate::types::{
     cfg_err, check_finite, check_nonneg, check_pos, Mode, PlannerError, PlannerOutput,
-    PlannerState, SonarReturns, Target,
+    PlannerState, SonarScan, Target,
 };
 
 /// Remembered obstacle points of the leader.
@@ -179,7 +179,7 @@ pub struct LeaderInput {
     /// Depth from the pressure sensor, m.
     pub depth_m: f64,
     /// A new scan this step, if any.
-    pub sonar: Option<SonarReturns>,
+    pub sonar: Option<SonarScan>,
 }
 
 #[derive(Debug, Clone, Copy)]

@@ -63,4 +63,4 @@ pub use follower::{
     FollowerConfig, FollowerInput, FollowerPlanner, ParentEstimate, PoseMeasurement,
 };
 pub use leader::{LeaderConfig, LeaderInput, LeaderPlanner};
-pub use types::{Mode, PlannerError, PlannerOutput, PlannerState, SonarReturns, Target, MAX_BEAMS};
+pub use types::{Mode, PlannerError, PlannerOutput, PlannerState, SonarScan, Target, MAX_BEAMS};

@@ -5,7 +5,7 @@ use ipc_types::{Channel, LeaderPose, Nav, PlannerState, Sample, Setpoint, Sonar}
 use nalgebra::{Isometry3, Matrix6, Translation3, Vector3, Vector6};
 use planner::{
     FollowerConfig, FollowerInput, FollowerPlanner, LeaderConfig, LeaderInput, LeaderPlanner,
-    PlannerOutput, PoseMeasurement, SonarReturns,
+    PlannerOutput, PoseMeasurement, SonarScan,
 };
 use shoal_runtime::convert::{arr, quat};
 use shoal_runtime::ports::Origin;
@@ -98,20 +98,6 @@ impl PlannerTask {
     }
 }
 
-fn sonar_returns(s: &Sonar) -> SonarReturns {
-    let mut r = SonarReturns {
-        ranges_m: s.ranges_m,
-        azimuth_rad: s.azimuth_rad,
-        elevation_rad: s.elevation_rad,
-        count: (s.count as usize).min(ipc_types::MAX_BEAMS),
-        ..Default::default()
-    };
-    for (d, v) in r.valid.iter_mut().zip(s.valid) {
-        *d = v != 0;
-    }
-    r
-}
-
 fn nu_of(n: &Nav) -> Vector6<f64> {
     let v = n.velocity_body_mps;
     let w = n.rates_body_radps;
@@ -151,7 +137,7 @@ impl Task for PlannerTask {
                     nu: nu_of(&nav),
                     position_ned_m: Vector3::from(nav.position_ned_m),
                     depth_m: nav.depth_m,
-                    sonar: sonar.as_ref().map(sonar_returns),
+                    sonar: sonar.as_ref().map(SonarScan::from_sample),
                 })
                 .map_err(TaskError::from_display)?
             }
@@ -181,7 +167,7 @@ impl Task for PlannerTask {
                         nu: nu_of(&nav),
                         depth_m: nav.depth_m,
                         pose,
-                        sonar: sonar.as_ref().map(sonar_returns),
+                        sonar: sonar.as_ref().map(SonarScan::from_sample),
                     })
                     .map_err(TaskError::from_display)?
             }

@@ -2,8 +2,7 @@
 
 use nalgebra::Vector3;
 
-/// Capacity of a rangefinder sample (`shoal.Sonar.v1`).
-pub const MAX_BEAMS: usize = 16;
+pub use ipc_types::{SonarScan, MAX_BEAMS};
 
 /// Errors of this crate.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -60,46 +59,6 @@ pub(crate) fn check_finite(key: &str, v: f64) -> Result<(), PlannerError> {
         Ok(())
     } else {
         Err(cfg_err(key, format!("must be finite, got {v}")))
-    }
-}
-
-/// One rangefinder scan as the planner reads it (the fields of `shoal.Sonar.v1`).
-///
-/// Azimuth positive to starboard, elevation positive down, body axes; entries `0..count`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SonarReturns {
-    /// Range per beam, m (meaningful where `valid`).
-    pub ranges_m: [f64; MAX_BEAMS],
-    /// Beam azimuth, rad.
-    pub azimuth_rad: [f64; MAX_BEAMS],
-    /// Beam elevation, rad.
-    pub elevation_rad: [f64; MAX_BEAMS],
-    /// `false` = no return.
-    pub valid: [bool; MAX_BEAMS],
-    /// Beams in use.
-    pub count: usize,
-}
-
-impl Default for SonarReturns {
-    fn default() -> Self {
-        Self {
-            ranges_m: [0.0; MAX_BEAMS],
-            azimuth_rad: [0.0; MAX_BEAMS],
-            elevation_rad: [0.0; MAX_BEAMS],
-            valid: [false; MAX_BEAMS],
-            count: 0,
-        }
-    }
-}
-
-impl SonarReturns {
-    /// Valid returns as `(range, azimuth, elevation)`, finite ones only.
-    pub fn returns(&self) -> impl Iterator<Item = (f64, f64, f64)> + '_ {
-        (0..self.count.min(MAX_BEAMS)).filter_map(move |i| {
-            let (r, a, e) = (self.ranges_m[i], self.azimuth_rad[i], self.elevation_rad[i]);
-            (self.valid[i] && r.is_finite() && a.is_finite() && e.is_finite() && r >= 0.0)
-                .then_some((r, a, e))
-        })
     }
 }
 

@@ -7,7 +7,7 @@ use approx::assert_relative_eq;
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 use planner::{
     FollowerConfig, FollowerInput, FollowerPlanner, Mode, PlannerError, PlannerOutput,
-    PoseMeasurement, SonarReturns,
+    PoseMeasurement, SonarScan,
 };
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -37,10 +37,10 @@ struct Wall {
 
 /// Returns of the default 4-beam sonar (−30, −10, 10, 30 deg, 20 m, mount 0.8 m) against
 /// the wall, noise-free, vehicle heading north.
-fn scan(me: &Vector3<f64>, wall: Option<&Wall>) -> SonarReturns {
-    let mut s = SonarReturns {
+fn scan(me: &Vector3<f64>, wall: Option<&Wall>) -> SonarScan {
+    let mut s = SonarScan {
         count: 4,
-        ..SonarReturns::default()
+        ..SonarScan::default()
     };
     for (i, az_deg) in [-30.0f64, -10.0, 10.0, 30.0].iter().enumerate() {
         let az = az_deg.to_radians();
@@ -108,7 +108,7 @@ impl World {
     fn step(
         &mut self,
         fix: Option<PoseMeasurement>,
-        sonar: Option<SonarReturns>,
+        sonar: Option<SonarScan>,
         follow: bool,
     ) -> PlannerOutput {
         let att = UnitQuaternion::from_euler_angles(0.0, 0.0, self.yaw);

@@ -2,7 +2,7 @@
 #![allow(clippy::unwrap_used, clippy::panic)] // test fixtures
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
-use planner::{LeaderConfig, LeaderInput, LeaderPlanner, Mode, PlannerOutput, SonarReturns};
+use planner::{LeaderConfig, LeaderInput, LeaderPlanner, Mode, PlannerOutput, SonarScan};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::Distribution;
@@ -44,7 +44,7 @@ impl Leader {
         let att = UnitQuaternion::from_euler_angles(0.0, 0.0, self.yaw);
         let iso = Isometry3::from_parts(Translation3::from(self.pos), att);
         let s = self.sonar.scan(&self.field, &iso, &[], &mut self.rng);
-        let sonar = SonarReturns {
+        let sonar = SonarScan {
             ranges_m: s.ranges_m,
             azimuth_rad: s.azimuth_rad,
             elevation_rad: s.elevation_rad,

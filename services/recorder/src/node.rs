@@ -159,75 +159,14 @@ impl RecorderTask {
                 let service = ipc_types::service_name(&run, &v.name, ch);
                 let topic = ipc_types::topic(&v.name, ch);
                 let b = buffer.min(vlimits.max_buffer);
-                let tap = match ch {
-                    Channel::Truth => open_tap::<ipc_types::Truth>(
-                        rt,
-                        &mut writer,
-                        &service,
-                        &topic,
-                        &vlimits,
-                        b,
-                    )?,
-                    Channel::Nav => {
-                        open_tap::<ipc_types::Nav>(rt, &mut writer, &service, &topic, &vlimits, b)?
-                    }
-                    Channel::Thrust => open_tap::<ipc_types::Thrust>(
-                        rt,
-                        &mut writer,
-                        &service,
-                        &topic,
-                        &vlimits,
-                        b,
-                    )?,
-                    Channel::Sonar => open_tap::<ipc_types::Sonar>(
-                        rt,
-                        &mut writer,
-                        &service,
-                        &topic,
-                        &vlimits,
-                        b,
-                    )?,
-                    Channel::Beacons => open_tap::<ipc_types::Beacons>(
-                        rt,
-                        &mut writer,
-                        &service,
-                        &topic,
-                        &vlimits,
-                        b,
-                    )?,
-                    Channel::LeaderPose => open_tap::<ipc_types::LeaderPose>(
-                        rt,
-                        &mut writer,
-                        &service,
-                        &topic,
-                        &vlimits,
-                        b,
-                    )?,
-                    Channel::Setpoint => open_tap::<ipc_types::Setpoint>(
-                        rt,
-                        &mut writer,
-                        &service,
-                        &topic,
-                        &vlimits,
-                        b,
-                    )?,
-                    Channel::PlannerState => open_tap::<ipc_types::PlannerState>(
-                        rt,
-                        &mut writer,
-                        &service,
-                        &topic,
-                        &vlimits,
-                        b,
-                    )?,
-                    Channel::MpcStats => open_tap::<ipc_types::MpcStats>(
-                        rt,
-                        &mut writer,
-                        &service,
-                        &topic,
-                        &vlimits,
-                        b,
-                    )?,
-                };
+                let tap = ipc_types::with_channel_type!(ch, T => open_tap::<T>(
+                    rt,
+                    &mut writer,
+                    &service,
+                    &topic,
+                    &vlimits,
+                    b,
+                )?);
                 taps.push(tap);
             }
         }

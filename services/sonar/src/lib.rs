@@ -51,8 +51,7 @@ use serde::{Deserialize, Serialize};
 
 pub use obstacle::{Obstacle, ObstacleField};
 
-/// The `shoal.Sonar.v1` sample has room for this many beams.
-pub const MAX_BEAMS: usize = 16;
+pub use ipc_types::{SonarScan, MAX_BEAMS};
 
 /// Errors of this crate.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -203,35 +202,6 @@ impl SonarConfig {
             ));
         }
         Ok(())
-    }
-}
-
-/// One scan: a fixed-size copy of what goes on the `sonar` channel.
-///
-/// Entries `0..count` are the configured beams in order; the rest are zero and invalid.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SonarScan {
-    /// Measured range, m. For a beam with no return it holds `range_max_m` (never NaN).
-    pub ranges_m: [f64; MAX_BEAMS],
-    /// Beam azimuth in body axes, positive to starboard, rad.
-    pub azimuth_rad: [f64; MAX_BEAMS],
-    /// Beam elevation in body axes, positive down, rad.
-    pub elevation_rad: [f64; MAX_BEAMS],
-    /// `false` = no return within range.
-    pub valid: [bool; MAX_BEAMS],
-    /// Number of beams in use.
-    pub count: usize,
-}
-
-impl Default for SonarScan {
-    fn default() -> Self {
-        Self {
-            ranges_m: [0.0; MAX_BEAMS],
-            azimuth_rad: [0.0; MAX_BEAMS],
-            elevation_rad: [0.0; MAX_BEAMS],
-            valid: [false; MAX_BEAMS],
-            count: 0,
-        }
     }
 }
 

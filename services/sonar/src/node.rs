@@ -70,13 +70,7 @@ impl Task for SonarTask {
             .sonar
             .scan(&self.field, &pose, &self.others, &mut self.rng);
         let mut s = ipc_types::Sonar::zeroed();
-        s.ranges_m = scan.ranges_m;
-        s.azimuth_rad = scan.azimuth_rad;
-        s.elevation_rad = scan.elevation_rad;
-        for (d, v) in s.valid.iter_mut().zip(scan.valid) {
-            *d = u8::from(v);
-        }
-        s.count = scan.count as u32;
+        scan.write_to(&mut s);
         let origin = Origin::of(&w.header);
         self.out.publish(s, ctx, origin)?;
         Ok(())

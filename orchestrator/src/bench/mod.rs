@@ -1,0 +1,6 @@
+//! The benchmarks of `shoal bench`: each prints its figures (never a timed
+//! assertion).
+
+pub mod ipc;
+pub mod run;
+pub mod scale;

@@ -1,0 +1,30 @@
+//! The `shoal` library: runs a group of AUVs in leader–follower formation as
+//! real processes over iceoryx2, records every channel to MCAP, and analyses,
+//! plots, exports and replays the recordings. The `shoal` binary
+//! (`main.rs`) is [`cli::main`].
+//!
+//! One folder per question:
+//!
+//! | folder | answers |
+//! |---|---|
+//! | [`cli`] | what the user typed: one file per command, clap arguments and printing only |
+//! | [`preflight`] | may this scenario run here: load, resolve (D_a/D_b), advice, resources against the machine's limits |
+//! | [`launch`] | how a run is driven: processes, lockstep and realtime, supervision and restart, the OS calls |
+//! | [`analysis`] | what the run did: trajectories, slot error, passage, the typed `summary.json`, compare |
+//! | [`plots`] | the figures of a run and of a comparison |
+//! | [`export`] | the recording for other viewers (Foxglove) |
+//! | [`replay`] | a recording played back, or one process re-run on it |
+//! | [`bench`] | the benchmarks that print figures (`shoal bench`) |
+//! | [`gen`] | generated large-group scenarios (`shoal gen`) |
+//! | [`pipeline`] | one scenario from resolution to summary and plots (run, compare, benches) |
+
+pub mod analysis;
+pub mod bench;
+pub mod cli;
+pub mod export;
+pub mod gen;
+pub mod launch;
+pub mod pipeline;
+pub mod plots;
+pub mod preflight;
+pub mod replay;
