@@ -133,7 +133,7 @@ fn a_replay_reaches_a_live_subscriber_in_the_original_order() {
     let limits = ChannelLimits::vehicle();
     let start = Instant::now();
     let mut sub = loop {
-        match shoal_runtime::node_subscriber::<ipc_types::Truth>(
+        match shoal_runtime::node_subscriber::<ipc_types::Truth, _>(
             &node,
             &service,
             &limits,

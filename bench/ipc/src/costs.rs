@@ -15,7 +15,7 @@ use shoal_runtime::ports::Origin;
 use shoal_runtime::{ChannelLimits, LatencyRecorder, Mode, StepContext};
 
 use crate::payload::{Payload, Raw256, Raw4K};
-use crate::{dbg, raw_config, BenchError, PeerConfig};
+use crate::{cause, raw_config, BenchError, Cause, PeerConfig};
 
 /// Batches per figure; the fastest counts.
 const REPEATS: usize = 25;
@@ -111,7 +111,7 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
     let node = NodeBuilder::new()
         .config(&raw_config(&cfg.run_id))
         .create::<ipc::Service>()
-        .map_err(|e| BenchError::setup("the costs node")(dbg(e)))?;
+        .map_err(|e| BenchError::setup("the costs node")(cause(e)))?;
     let raw = R::make(3);
     let hop_raw_ns = raw_hop::<R>(&node, cfg, "costs-raw", None, &raw, hops)?;
     let hop_raw_shoal_limits_ns = raw_hop::<R>(
@@ -127,8 +127,8 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
     let snode = shoal_runtime::domain_node(&cfg.run_id, "bench/costs")?;
     let sname = bench_service_name(&cfg.run_id, "costs-shoal", cfg.size, BenchDirection::Ping);
     let limits = ChannelLimits::vehicle();
-    let mut stx = shoal_runtime::node_publisher::<S>(&snode, &sname, &limits)?;
-    let mut srx = shoal_runtime::node_subscriber::<S>(&snode, &sname, &limits, 2)?;
+    let mut stx = shoal_runtime::node_publisher::<S, _>(&snode, &sname, &limits)?;
+    let mut srx = shoal_runtime::node_subscriber::<S, _>(&snode, &sname, &limits, 2)?;
     let ctx = StepContext {
         sim_time_ns: 0,
         tick: 0,
@@ -180,7 +180,7 @@ fn raw_hop<R: Payload + ZeroCopySend>(
 ) -> Result<f64, BenchError> {
     let name = bench_service_name(&cfg.run_id, case, cfg.size, BenchDirection::Ping);
     let service_name =
-        ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+        ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(cause(e)))?;
     let builder = node.service_builder(&service_name).publish_subscribe::<R>();
     let service = match limits {
         None => builder.open_or_create(),
@@ -194,35 +194,35 @@ fn raw_hop<R: Payload + ZeroCopySend>(
             .enable_safe_overflow(true)
             .open_or_create(),
     }
-    .map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+    .map_err(|e| BenchError::setup(name.clone())(cause(e)))?;
     let tx = match limits {
         None => service.publisher_builder().create(),
         Some(_) => service.publisher_builder().max_loaned_samples(2).create(),
     }
-    .map_err(|e| BenchError::setup("a raw publisher")(dbg(e)))?;
+    .map_err(|e| BenchError::setup("a raw publisher")(cause(e)))?;
     let rx = match limits {
         None => service.subscriber_builder().create(),
         Some(_) => service.subscriber_builder().buffer_size(2).create(),
     }
-    .map_err(|e| BenchError::setup("a raw subscriber")(dbg(e)))?;
+    .map_err(|e| BenchError::setup("a raw subscriber")(cause(e)))?;
     let mut failure: Option<BenchError> = None;
     let ns = best_of(hops, || {
-        let step = || -> Result<(), String> {
+        let step = || -> Result<(), Cause> {
             tx.loan_uninit()
-                .map_err(dbg)?
+                .map_err(cause)?
                 .write_payload(*black_box(raw))
                 .send()
-                .map_err(dbg)?;
-            while let Some(s) = rx.receive().map_err(dbg)? {
+                .map_err(cause)?;
+            while let Some(s) = rx.receive().map_err(cause)? {
                 let v: R = *s;
                 black_box(v);
             }
             Ok(())
         };
-        if let Err(reason) = step() {
+        if let Err(source) = step() {
             failure = Some(BenchError::Io {
                 what: "raw hop",
-                reason,
+                source,
             });
         }
     });
@@ -243,7 +243,7 @@ fn replica_hop<S: Sample + Payload>(
     let l = ChannelLimits::vehicle();
     let name = bench_service_name(&cfg.run_id, "costs-replica", cfg.size, BenchDirection::Ping);
     let service_name =
-        ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+        ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(cause(e)))?;
     let service = node
         .service_builder(&service_name)
         .publish_subscribe::<S>()
@@ -255,17 +255,17 @@ fn replica_hop<S: Sample + Payload>(
         .subscriber_max_borrowed_samples(2)
         .enable_safe_overflow(true)
         .open_or_create()
-        .map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+        .map_err(|e| BenchError::setup(name.clone())(cause(e)))?;
     let tx = service
         .publisher_builder()
         .max_loaned_samples(2)
         .create()
-        .map_err(|e| BenchError::setup("a replica publisher")(dbg(e)))?;
+        .map_err(|e| BenchError::setup("a replica publisher")(cause(e)))?;
     let rx = service
         .subscriber_builder()
         .buffer_size(2)
         .create()
-        .map_err(|e| BenchError::setup("a replica subscriber")(dbg(e)))?;
+        .map_err(|e| BenchError::setup("a replica subscriber")(cause(e)))?;
     let mut held: std::collections::VecDeque<S> = std::collections::VecDeque::with_capacity(32);
     let mut latency = LatencyRecorder::new();
     let mut seq = 0u64;
@@ -273,7 +273,7 @@ fn replica_hop<S: Sample + Payload>(
     let mut lost = 0u64;
     let mut failure: Option<BenchError> = None;
     let ns = best_of(hops, || {
-        let mut step = || -> Result<(), String> {
+        let mut step = || -> Result<(), Cause> {
             // Publisher::publish
             let mut out = *black_box(sample);
             if !out.payload_is_finite() {
@@ -286,10 +286,10 @@ fn replica_hop<S: Sample + Payload>(
             h.origin_mono_ns = origin.mono_ns;
             h.origin_sim_time_ns = origin.sim_time_ns;
             h.publish_mono_ns = shoal_runtime::mono_ns();
-            tx.send_copy(out).map_err(dbg)?;
+            tx.send_copy(out).map_err(cause)?;
             seq += 1;
             // Subscriber::take_ready
-            while let Some(r) = rx.receive().map_err(dbg)? {
+            while let Some(r) = rx.receive().map_err(cause)? {
                 let v: S = *r;
                 drop(r);
                 let h = *v.header();
@@ -310,10 +310,10 @@ fn replica_hop<S: Sample + Payload>(
             }
             Ok(())
         };
-        if let Err(reason) = step() {
+        if let Err(source) = step() {
             failure = Some(BenchError::Io {
                 what: "replica hop",
-                reason,
+                source,
             });
         }
     });

@@ -257,20 +257,22 @@ pub enum PeerOutput {
 #[derive(Debug, thiserror::Error)]
 pub enum BenchError {
     /// A node, service, port or socket could not be created.
-    #[error("cannot set up {what}: {reason}")]
+    #[error("cannot set up {what}")]
     Setup {
         /// What was being created.
         what: String,
         /// Cause.
-        reason: String,
+        #[source]
+        source: Cause,
     },
     /// Sending, receiving or waiting failed.
-    #[error("{what} failed: {reason}")]
+    #[error("{what} failed")]
     Io {
         /// The operation.
         what: &'static str,
         /// Cause.
-        reason: String,
+        #[source]
+        source: Cause,
     },
     /// shoal's runtime refused.
     #[error(transparent)]
@@ -307,15 +309,18 @@ pub enum BenchError {
 }
 
 impl BenchError {
-    pub(crate) fn setup(what: impl Into<String>) -> impl FnOnce(String) -> BenchError {
+    pub(crate) fn setup(what: impl Into<String>) -> impl FnOnce(Cause) -> BenchError {
         let what = what.into();
-        move |reason| BenchError::Setup { what, reason }
+        move |source| BenchError::Setup { what, source }
     }
 }
 
-/// Formats any `Debug` error as a reason string (iceoryx2's errors are `Debug`).
-pub(crate) fn dbg<E: std::fmt::Debug>(e: E) -> String {
-    format!("{e:?}")
+/// The error that caused a [`BenchError`] (iceoryx2's, the OS's), kept whole.
+pub type Cause = Box<dyn std::error::Error + Send + Sync>;
+
+/// Boxes an error as a [`Cause`].
+pub(crate) fn cause<E: std::error::Error + Send + Sync + 'static>(e: E) -> Cause {
+    Box::new(e)
 }
 
 /// Longest run id whose iceoryx2 event sockets
@@ -328,7 +333,7 @@ pub fn run_peer(cfg: &PeerConfig) -> Result<PeerOutput, BenchError> {
     if cfg.run_id.len() > MAX_RUN_ID_LEN {
         return Err(BenchError::setup(format!("the domain `{}`", cfg.run_id))(format!(
             "a run id longer than {MAX_RUN_ID_LEN} bytes makes iceoryx2's event socket paths too long"
-        )));
+        ).into()));
     }
     if let Some(cpu) = cfg.cpu {
         pin_to(cpu)?;
@@ -393,7 +398,7 @@ fn pin_to(cpu: usize) -> Result<(), BenchError> {
     use iceoryx2_bb_posix::thread::{ThreadHandle, ThreadProperties};
     ThreadHandle::from_self()
         .set_affinity(&[cpu])
-        .map_err(|e| BenchError::setup(format!("CPU affinity {cpu}"))(dbg(e)))
+        .map_err(|e| BenchError::setup(format!("CPU affinity {cpu}"))(cause(e)))
 }
 
 /// The iceoryx2 configuration of a benchmark domain for the raw cases: the

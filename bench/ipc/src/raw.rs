@@ -13,7 +13,7 @@ use ipc_types::bench::{bench_event_name, bench_service_name, BenchDirection};
 use crate::driver::{run_pinger, run_ponger, Served};
 use crate::payload::Payload;
 use crate::wait::{check_run, notify, wait_error, Backoff};
-use crate::{dbg, raw_config, BenchError, Case, PeerConfig, PeerReport, PongReport};
+use crate::{cause, raw_config, BenchError, Case, PeerConfig, PeerReport, PongReport};
 
 /// The ports of one raw peer.
 struct Ports<M: Payload + ZeroCopySend> {
@@ -31,7 +31,7 @@ fn open<M: Payload + ZeroCopySend>(cfg: &PeerConfig, ping: bool) -> Result<Ports
         .config(&config)
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
-        .map_err(|e| BenchError::setup("the raw iceoryx2 node")(dbg(e)))?;
+        .map_err(|e| BenchError::setup("the raw iceoryx2 node")(cause(e)))?;
     let (out_dir, in_dir) = if ping {
         (BenchDirection::Ping, BenchDirection::Pong)
     } else {
@@ -41,40 +41,40 @@ fn open<M: Payload + ZeroCopySend>(cfg: &PeerConfig, ping: bool) -> Result<Ports
     let pubsub = |dir| {
         let name = bench_service_name(&cfg.run_id, case, cfg.size, dir);
         let service_name =
-            ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+            ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(cause(e)))?;
         node.service_builder(&service_name)
             .publish_subscribe::<M>()
             .open_or_create()
-            .map_err(|e| BenchError::setup(name)(dbg(e)))
+            .map_err(|e| BenchError::setup(name)(cause(e)))
     };
     let tx = pubsub(out_dir)?
         .publisher_builder()
         .create()
-        .map_err(|e| BenchError::setup("a raw publisher")(dbg(e)))?;
+        .map_err(|e| BenchError::setup("a raw publisher")(cause(e)))?;
     let rx = pubsub(in_dir)?
         .subscriber_builder()
         .create()
-        .map_err(|e| BenchError::setup("a raw subscriber")(dbg(e)))?;
+        .map_err(|e| BenchError::setup("a raw subscriber")(cause(e)))?;
     let events = if cfg.case == Case::IoxPoll {
         None
     } else {
         let event = |dir| {
             let name = bench_event_name(&cfg.run_id, case, cfg.size, dir);
             let service_name =
-                ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(dbg(e)))?;
+                ServiceName::new(&name).map_err(|e| BenchError::setup(name.clone())(cause(e)))?;
             node.service_builder(&service_name)
                 .event()
                 .open_or_create()
-                .map_err(|e| BenchError::setup(name)(dbg(e)))
+                .map_err(|e| BenchError::setup(name)(cause(e)))
         };
         let notifier = event(out_dir)?
             .notifier_builder()
             .create()
-            .map_err(|e| BenchError::setup("a raw notifier")(dbg(e)))?;
+            .map_err(|e| BenchError::setup("a raw notifier")(cause(e)))?;
         let listener = event(in_dir)?
             .listener_builder()
             .create()
-            .map_err(|e| BenchError::setup("a raw listener")(dbg(e)))?;
+            .map_err(|e| BenchError::setup("a raw listener")(cause(e)))?;
         Some((notifier, listener))
     };
     Ok(Ports {
@@ -91,7 +91,7 @@ fn send<M: Payload + ZeroCopySend>(
 ) -> Result<(), BenchError> {
     let sample = tx.loan_uninit().map_err(|e| BenchError::Io {
         what: "loan",
-        reason: dbg(e),
+        source: cause(e),
     })?;
     sample
         .write_payload(*m)
@@ -99,7 +99,7 @@ fn send<M: Payload + ZeroCopySend>(
         .map(|_| ())
         .map_err(|e| BenchError::Io {
             what: "send",
-            reason: dbg(e),
+            source: cause(e),
         })
 }
 
@@ -111,7 +111,7 @@ fn take_round<M: Payload + ZeroCopySend>(
     let mut found = None;
     while let Some(s) = rx.receive().map_err(|e| BenchError::Io {
         what: "receive",
-        reason: dbg(e),
+        source: cause(e),
     })? {
         if s.round() == round {
             found = Some(*s);
@@ -129,7 +129,7 @@ fn echo_all<M: Payload + ZeroCopySend>(
     let mut served = Served::default();
     while let Some(s) = rx.receive().map_err(|e| BenchError::Io {
         what: "receive",
-        reason: dbg(e),
+        source: cause(e),
     })? {
         let round = s.round();
         send(tx, &s)?;
@@ -168,10 +168,10 @@ pub(crate) fn ping<M: Payload + ZeroCopySend>(cfg: &PeerConfig) -> Result<PeerRe
             let waitset = WaitSetBuilder::new()
                 .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
                 .create::<ipc::Service>()
-                .map_err(|e| BenchError::setup("a wait set")(dbg(e)))?;
+                .map_err(|e| BenchError::setup("a wait set")(cause(e)))?;
             let guard = waitset
                 .attach_notification(listener)
-                .map_err(|e| BenchError::setup("a wait set attachment")(dbg(e)))?;
+                .map_err(|e| BenchError::setup("a wait set attachment")(cause(e)))?;
             run_pinger(
                 cfg,
                 |m| {
@@ -245,10 +245,10 @@ pub(crate) fn pong<M: Payload + ZeroCopySend>(cfg: &PeerConfig) -> Result<PongRe
             let waitset = WaitSetBuilder::new()
                 .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
                 .create::<ipc::Service>()
-                .map_err(|e| BenchError::setup("a wait set")(dbg(e)))?;
+                .map_err(|e| BenchError::setup("a wait set")(cause(e)))?;
             let guard = waitset
                 .attach_notification(listener)
-                .map_err(|e| BenchError::setup("a wait set attachment")(dbg(e)))?;
+                .map_err(|e| BenchError::setup("a wait set attachment")(cause(e)))?;
             run_ponger(cfg.warmup, || {
                 let mut served = Served::default();
                 let mut failure = None;

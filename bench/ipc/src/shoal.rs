@@ -18,7 +18,7 @@ use shoal_runtime::{ChannelLimits, Mode, Publisher, StepContext, Subscriber};
 use crate::driver::{run_pinger, run_ponger, Served};
 use crate::payload::Payload;
 use crate::wait::{check_run, notify, wait_error, Backoff};
-use crate::{dbg, BenchError, Case, PeerConfig, PeerReport, PongReport};
+use crate::{cause, BenchError, Case, PeerConfig, PeerReport, PongReport};
 
 /// Subscriber buffer of the bench channels (a service's usual depth).
 const BUFFER: usize = 2;
@@ -53,12 +53,12 @@ fn open<S: Sample>(cfg: &PeerConfig, ping: bool) -> Result<Ports<S>, BenchError>
     let node = shoal_runtime::domain_node(&cfg.run_id, &format!("{vehicle}/{me}"))?;
     let limits = ChannelLimits::vehicle();
     let case = cfg.case.name();
-    let tx = shoal_runtime::node_publisher::<S>(
+    let tx = shoal_runtime::node_publisher::<S, _>(
         &node,
         &bench_service_name(&cfg.run_id, case, cfg.size, out_dir),
         &limits,
     )?;
-    let rx = shoal_runtime::node_subscriber::<S>(
+    let rx = shoal_runtime::node_subscriber::<S, _>(
         &node,
         &bench_service_name(&cfg.run_id, case, cfg.size, in_dir),
         &limits,
@@ -68,11 +68,11 @@ fn open<S: Sample>(cfg: &PeerConfig, ping: bool) -> Result<Ports<S>, BenchError>
         let notifier = shoal_runtime::open_wake(&node, &cfg.run_id, &vehicle, peer)?
             .notifier_builder()
             .create()
-            .map_err(|e| BenchError::setup("the peer's wake notifier")(dbg(e)))?;
+            .map_err(|e| BenchError::setup("the peer's wake notifier")(cause(e)))?;
         let listener = shoal_runtime::open_wake(&node, &cfg.run_id, &vehicle, me)?
             .listener_builder()
             .create()
-            .map_err(|e| BenchError::setup("the wake listener")(dbg(e)))?;
+            .map_err(|e| BenchError::setup("the wake listener")(cause(e)))?;
         Some((notifier, listener))
     } else {
         None
@@ -142,7 +142,7 @@ fn waitset() -> Result<WaitSet<ipc::Service>, BenchError> {
     WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
-        .map_err(|e| BenchError::setup("a wait set")(dbg(e)))
+        .map_err(|e| BenchError::setup("a wait set")(cause(e)))
 }
 
 /// The pinger of a shoal case. It is the "sensor": each ping starts a new
@@ -161,7 +161,7 @@ pub(crate) fn ping<S: Sample + Payload>(cfg: &PeerConfig) -> Result<PeerReport, 
             let waitset = waitset()?;
             let guard = waitset
                 .attach_notification(&*listener)
-                .map_err(|e| BenchError::setup("a wait set attachment")(dbg(e)))?;
+                .map_err(|e| BenchError::setup("a wait set attachment")(cause(e)))?;
             let mut tick = 0u64;
             run_pinger(
                 cfg,
@@ -231,7 +231,7 @@ pub(crate) fn pong<S: Sample + Payload>(cfg: &PeerConfig) -> Result<PongReport, 
             let waitset = waitset()?;
             let guard = waitset
                 .attach_notification(&*listener)
-                .map_err(|e| BenchError::setup("a wait set attachment")(dbg(e)))?;
+                .map_err(|e| BenchError::setup("a wait set attachment")(cause(e)))?;
             let mut tick = 0u64;
             run_ponger(cfg.warmup, || {
                 let mut served = Served::default();

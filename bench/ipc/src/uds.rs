@@ -13,11 +13,11 @@ fn io_error(what: &'static str) -> impl Fn(std::io::Error) -> BenchError {
     move |e| match e.kind() {
         std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut => BenchError::Io {
             what,
-            reason: "nothing arrived within the peer timeout".into(),
+            source: "nothing arrived within the peer timeout".into(),
         },
         _ => BenchError::Io {
             what,
-            reason: e.to_string(),
+            source: Box::new(e),
         },
     }
 }
@@ -41,7 +41,7 @@ pub(crate) fn ping<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<PeerR
                 return Err(BenchError::setup(format!(
                     "a connection to {}",
                     path.display()
-                ))(e.to_string()))
+                ))(Box::new(e)))
             }
             Err(_) => std::thread::sleep(Duration::from_millis(2)),
         }
@@ -73,11 +73,11 @@ pub(crate) fn pong<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<PongR
     let path = socket_path(&cfg.run_id, cfg.size);
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir)
-            .map_err(|e| BenchError::setup(dir.display().to_string())(e.to_string()))?;
+            .map_err(|e| BenchError::setup(dir.display().to_string())(Box::new(e)))?;
     }
     let _ = std::fs::remove_file(&path);
     let listener = UnixListener::bind(&path)
-        .map_err(|e| BenchError::setup(path.display().to_string())(e.to_string()))?;
+        .map_err(|e| BenchError::setup(path.display().to_string())(Box::new(e)))?;
     let result = serve::<M>(&listener, cfg.timeout(), cfg.warmup);
     let _ = std::fs::remove_file(&path);
     result

@@ -6,7 +6,7 @@
 
 use std::time::{Duration, Instant};
 
-use crate::{dbg, BenchError};
+use crate::{cause, BenchError};
 
 /// Misses spent in `spin_loop` before each further miss yields the CPU.
 const SPIN_MISSES: u32 = 20_000;
@@ -64,15 +64,15 @@ pub(crate) fn notify(
 ) -> Result<(), BenchError> {
     n.notify().map(|_| ()).map_err(|e| BenchError::Io {
         what: "notify",
-        reason: dbg(e),
+        source: cause(e),
     })
 }
 
 /// A failed wait, as a bench error.
-pub(crate) fn wait_error(e: impl std::fmt::Debug) -> BenchError {
+pub(crate) fn wait_error(e: impl std::error::Error + Send + Sync + 'static) -> BenchError {
     BenchError::Io {
         what: "waiting",
-        reason: dbg(e),
+        source: cause(e),
     }
 }
 

@@ -112,7 +112,7 @@ impl Ports {
     /// Opens the ports of a run whose processes are `procs`.
     pub(crate) fn open(run_id: &str, procs: &[ProcessSpec]) -> anyhow::Result<Self> {
         let node = shoal_runtime::domain_node(run_id, "run/orchestrator")?;
-        let clock = shoal_runtime::node_publisher::<Clock>(
+        let clock = shoal_runtime::node_publisher::<Clock, _>(
             &node,
             &ipc_types::run_service_name(run_id, RunChannel::Clock),
             &ChannelLimits::clock(procs.len()),
@@ -120,13 +120,13 @@ impl Ports {
         let done = shoal_runtime::open_done(&node, run_id, procs.len())?
             .listener_builder()
             .create()
-            .map_err(|e| anyhow::anyhow!("done listener: {e:?}"))?;
+            .context("done listener")?;
         let mut wakes = Vec::with_capacity(procs.len());
         for p in procs {
             let n = shoal_runtime::open_wake(&node, run_id, &p.vehicle, p.kind.name())?
                 .notifier_builder()
                 .create()
-                .map_err(|e| anyhow::anyhow!("wake notifier of {}: {e:?}", p.label()))?;
+                .with_context(|| format!("wake notifier of {}", p.label()))?;
             wakes.push(n);
         }
         let journal = Journal::open(&node, run_id)?;
@@ -169,7 +169,7 @@ impl Ports {
         for &i in due {
             self.wakes[i]
                 .notify()
-                .map_err(|e| anyhow::anyhow!("wake {}: {e:?}", procs[i].label()))?;
+                .with_context(|| format!("wake {}", procs[i].label()))?;
         }
         Ok(())
     }
@@ -481,11 +481,11 @@ fn realtime(
     let waitset = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()
-        .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
+        .context("waitset")?;
     let _ = &ports.node;
     let _tick = waitset
         .attach_interval(Duration::from_millis(100))
-        .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
+        .context("waitset")?;
     loop {
         let now = shoal_runtime::mono_ns();
         if now >= end {
@@ -496,7 +496,7 @@ fn realtime(
                 |_| CallbackProgression::Continue,
                 Duration::from_millis(100),
             )
-            .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
+            .context("waitset")?;
         check_signal(r)?;
         let t_s = now.saturating_sub(epoch) as f64 * 1e-9;
         ports.recovery.track_truths();
@@ -635,7 +635,7 @@ pub(crate) fn wait_done(
                 ports.clock.update_connections()?;
                 ports.wakes[i]
                     .notify()
-                    .map_err(|e| anyhow::anyhow!("wake {}: {e:?}", procs[i].label()))?;
+                    .with_context(|| format!("wake {}", procs[i].label()))?;
             }
         }
         if t.remaining == 0 && !ports.recovery.any_awaiting() {
@@ -649,7 +649,7 @@ pub(crate) fn wait_done(
                 ListenerWaitError::InterruptSignal => anyhow::Error::from(RunError::Interrupted(
                     termination_requested().unwrap_or("SIGINT"),
                 )),
-                other => anyhow::anyhow!("waiting for done: {other:?}"),
+                other => anyhow::Error::new(other).context("waiting for done"),
             })?;
         if t.remaining == 0 && t.ready.is_empty() && !ports.recovery.any_awaiting() {
             break;

@@ -146,7 +146,7 @@ impl Journal {
         node: &iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
         run_id: &str,
     ) -> anyhow::Result<Self> {
-        let publisher = shoal_runtime::node_publisher::<Event>(
+        let publisher = shoal_runtime::node_publisher::<Event, _>(
             node,
             &ipc_types::run_service_name(run_id, ipc_types::RunChannel::Events),
             &ChannelLimits::events(),
@@ -252,7 +252,7 @@ impl Recovery {
         r.restart_timeout = Duration::from_secs_f64(sup.restart_timeout_s);
         if r.policy == Policy::Restart {
             for p in procs.iter().filter(|p| p.kind == ProcessKind::SimPlant) {
-                let sub = shoal_runtime::node_subscriber::<Truth>(
+                let sub = shoal_runtime::node_subscriber::<Truth, _>(
                     node,
                     &ipc_types::service_name(&launch.run_id, &p.vehicle, ipc_types::Channel::Truth),
                     &ChannelLimits::vehicle(),

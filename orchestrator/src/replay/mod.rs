@@ -107,7 +107,7 @@ fn open_publisher(
         limits: &ChannelLimits,
     ) -> anyhow::Result<Box<dyn AnyPublisher>> {
         Ok(Box::new(Typed::<T> {
-            publisher: shoal_runtime::node_publisher::<T>(node, service, limits)?,
+            publisher: shoal_runtime::node_publisher::<T, _>(node, service, limits)?,
         }))
     }
     ipc_types::with_sample_type!(schema, T => typed::<T>(node, service, limits), else bail!("no sample type for schema {schema}"))
@@ -449,7 +449,7 @@ fn open_tap(
         limits: &ChannelLimits,
     ) -> anyhow::Result<Box<dyn AnyTap>> {
         Ok(Box::new(TypedTap::<T> {
-            sub: shoal_runtime::node_subscriber::<T>(node, service, limits, limits.max_buffer)?,
+            sub: shoal_runtime::node_subscriber::<T, _>(node, service, limits, limits.max_buffer)?,
         }))
     }
     ipc_types::with_sample_type!(schema, T => typed::<T>(node, service, limits), else bail!("no sample type for schema {schema}"))

@@ -89,6 +89,7 @@
 //! and returns it: finite and within bounds by construction, decaying to zero.
 #![forbid(unsafe_code)]
 
+pub mod node;
 pub mod prediction;
 
 use clarabel::algebra::CscMatrix;

@@ -2,14 +2,12 @@
 //! and `setpoint`, publishes `thrust` (saturated, never NaN) and `mpc_stats`.
 use clap::Parser;
 
-mod node;
-
 fn main() -> anyhow::Result<()> {
     let cli = shoal_runtime::ServiceCli::parse();
     shoal_runtime::init_tracing();
     let scenario = shoal_scenario::Scenario::from_file(&cli.scenario)?;
     let rt = shoal_runtime::Runtime::new(&cli.run)?;
-    let task = node::MpcTask::new(&rt, &scenario)?;
+    let task = mpc::node::MpcTask::new(&rt, &scenario)?;
     rt.run(task)?;
     Ok(())
 }

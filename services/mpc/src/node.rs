@@ -1,29 +1,36 @@
 //! Wiring of the predictive controller to its channels.
 
+use crate::{Mpc, MpcConfig, MpcInput, MpcTarget};
 use ipc_types::{Channel, MpcStats, Nav, Sample, Setpoint, Thrust};
-use mpc::{Mpc, MpcConfig, MpcInput, MpcTarget};
 use nalgebra::{Vector3, Vector6};
 use shoal_runtime::convert::quat;
 use shoal_runtime::ports::Origin;
-use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use shoal_runtime::{
+    ChannelLimits, Publisher, Runtime, Service, StepContext, Subscriber, Task, TaskError,
+};
 use shoal_scenario::Scenario;
 use sim_plant::model::Vehicle;
 use sim_plant::PlantConfig;
 
-pub struct MpcTask {
+/// The mpc process's task: its vehicle's `nav` and `setpoint` in; `thrust`
+/// and `mpc_stats` out; over iceoryx2 service kind `S` (shared memory in the
+/// binary).
+pub struct MpcTask<S: Service = shoal_runtime::ipc::Service> {
     mpc: Mpc,
     thrust_max: [f64; 6],
-    nav_in: Subscriber<Nav>,
-    setpoint_in: Subscriber<Setpoint>,
-    thrust_out: Publisher<Thrust>,
-    stats_out: Publisher<MpcStats>,
+    nav_in: Subscriber<Nav, S>,
+    setpoint_in: Subscriber<Setpoint, S>,
+    thrust_out: Publisher<Thrust, S>,
+    stats_out: Publisher<MpcStats, S>,
     nav: Option<Nav>,
     setpoint: Option<Setpoint>,
     failures: u64,
 }
 
-impl MpcTask {
-    pub fn new(rt: &Runtime, scenario: &Scenario) -> anyhow::Result<Self> {
+impl<S: Service> MpcTask<S> {
+    /// Opens the vehicle's ports on `rt` and builds its controller from the
+    /// scenario (step from the mpc rate, bounds from the plant).
+    pub fn new(rt: &Runtime<S>, scenario: &Scenario) -> anyhow::Result<Self> {
         let me = &rt.args().vehicle;
         let plant: PlantConfig = scenario.section("plant")?;
         let mut cfg: MpcConfig = scenario.section("mpc")?;
@@ -52,7 +59,7 @@ impl MpcTask {
     }
 }
 
-impl Task for MpcTask {
+impl<S: Service> Task for MpcTask<S> {
     fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
         if let Some(n) = self.nav_in.latest(ctx)? {
             self.nav = Some(n);

@@ -55,6 +55,7 @@ pub mod formation;
 pub mod frames;
 pub mod leader;
 pub mod nav_filter;
+pub mod node;
 pub mod observer;
 pub mod shift;
 mod types;

@@ -5,14 +5,12 @@
 //! its own vehicle's channels.
 use clap::Parser;
 
-mod node;
-
 fn main() -> anyhow::Result<()> {
     let cli = shoal_runtime::ServiceCli::parse();
     shoal_runtime::init_tracing();
     let scenario = shoal_scenario::Scenario::from_file(&cli.scenario)?;
     let rt = shoal_runtime::Runtime::new(&cli.run)?;
-    let task = node::PlannerTask::new(&rt, &scenario)?;
+    let task = planner::node::PlannerTask::new(&rt, &scenario)?;
     rt.run(task)?;
     Ok(())
 }

@@ -1,15 +1,17 @@
 //! Wiring of the planner library to its channels.
 
-use anyhow::Context;
-use ipc_types::{Channel, LeaderPose, Nav, PlannerState, Sample, Setpoint, Sonar};
-use nalgebra::{Isometry3, Matrix6, Translation3, Vector3, Vector6};
-use planner::{
+use crate::{
     FollowerConfig, FollowerInput, FollowerPlanner, LeaderConfig, LeaderInput, LeaderPlanner,
     PlannerOutput, PoseMeasurement, SonarScan,
 };
+use anyhow::Context;
+use ipc_types::{Channel, LeaderPose, Nav, PlannerState, Sample, Setpoint, Sonar};
+use nalgebra::{Isometry3, Matrix6, Translation3, Vector3, Vector6};
 use shoal_runtime::convert::{arr, quat};
 use shoal_runtime::ports::Origin;
-use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use shoal_runtime::{
+    ChannelLimits, Publisher, Runtime, Service, StepContext, Subscriber, Task, TaskError,
+};
 use shoal_scenario::Scenario;
 
 /// The follower configuration of one vehicle: the scenario's shared
@@ -37,25 +39,30 @@ struct NavNoise {
     position_noise_m: Option<f64>,
 }
 
-enum Role {
+enum Role<S: Service> {
     Leader(LeaderPlanner),
     Follower {
         planner: FollowerPlanner,
-        pose_in: Subscriber<LeaderPose>,
+        pose_in: Subscriber<LeaderPose, S>,
     },
 }
 
-pub struct PlannerTask {
-    role: Role,
-    nav_in: Subscriber<Nav>,
-    sonar_in: Subscriber<Sonar>,
-    setpoint_out: Publisher<Setpoint>,
-    state_out: Publisher<PlannerState>,
+/// The planner process's task: its vehicle's `nav`, `sonar` (and, for a
+/// follower, `leader_pose`) in; `setpoint` and `planner_state` out; over
+/// iceoryx2 service kind `S` (shared memory in the binary).
+pub struct PlannerTask<S: Service = shoal_runtime::ipc::Service> {
+    role: Role<S>,
+    nav_in: Subscriber<Nav, S>,
+    sonar_in: Subscriber<Sonar, S>,
+    setpoint_out: Publisher<Setpoint, S>,
+    state_out: Publisher<PlannerState, S>,
     nav: Option<Nav>,
 }
 
-impl PlannerTask {
-    pub fn new(rt: &Runtime, scenario: &Scenario) -> anyhow::Result<Self> {
+impl<S: Service> PlannerTask<S> {
+    /// Opens the vehicle's ports on `rt` and builds its leader or follower
+    /// planner from the (resolved) scenario.
+    pub fn new(rt: &Runtime<S>, scenario: &Scenario) -> anyhow::Result<Self> {
         let me = &rt.args().vehicle;
         let spec = scenario.vehicle(me).context("vehicle not in scenario")?;
         let run = &rt.args().run_id;
@@ -104,7 +111,7 @@ fn nu_of(n: &Nav) -> Vector6<f64> {
     Vector6::new(v[0], v[1], v[2], w[0], w[1], w[2])
 }
 
-impl Task for PlannerTask {
+impl<S: Service> Task for PlannerTask<S> {
     fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
         if let Some(n) = self.nav_in.latest(ctx)? {
             self.nav = Some(n);
@@ -127,9 +134,10 @@ impl Task for PlannerTask {
         let out: PlannerOutput = match &mut self.role {
             Role::Leader(p) => {
                 if nav.position_valid == 0 {
-                    return Err(TaskError(
-                        "the leader's nav has no absolute position".into(),
-                    ));
+                    return Err(TaskError::BadInput {
+                        input: "nav.position_valid",
+                        reason: "the leader's nav has no absolute position".into(),
+                    });
                 }
                 p.step(&LeaderInput {
                     t_s,
@@ -139,7 +147,7 @@ impl Task for PlannerTask {
                     depth_m: nav.depth_m,
                     sonar: sonar.as_ref().map(SonarScan::from_sample),
                 })
-                .map_err(TaskError::from_display)?
+                .map_err(TaskError::failed("leader planner step"))?
             }
             Role::Follower { planner, pose_in } => {
                 let pose = pose_in.latest(ctx)?.map(|p| {
@@ -169,7 +177,7 @@ impl Task for PlannerTask {
                         pose,
                         sonar: sonar.as_ref().map(SonarScan::from_sample),
                     })
-                    .map_err(TaskError::from_display)?
+                    .map_err(TaskError::failed("follower planner step"))?
             }
         };
         let mut sp = Setpoint::zeroed();

@@ -199,12 +199,14 @@ impl RecorderTask {
                     p.seq,
                     &self.arena[p.start..p.start + p.len],
                 )
-                .map_err(TaskError::from_display)?;
+                .map_err(TaskError::failed("recording write"))?;
         }
         // Close a chunk about once a second so a killed run loses little.
         let now = shoal_runtime::mono_ns();
         if now.saturating_sub(self.last_flush_mono_ns) > 1_000_000_000 {
-            writer.flush().map_err(TaskError::from_display)?;
+            writer
+                .flush()
+                .map_err(TaskError::failed("recording flush"))?;
             self.last_flush_mono_ns = now;
         }
         Ok(())
@@ -228,8 +230,10 @@ impl Task for RecorderTask {
             meta.insert("rejected".to_string(), rejected.to_string());
             writer
                 .metadata("shoal.recorder", meta)
-                .map_err(TaskError::from_display)?;
-            let n = writer.finish().map_err(TaskError::from_display)?;
+                .map_err(TaskError::failed("recording metadata"))?;
+            let n = writer
+                .finish()
+                .map_err(TaskError::failed("recording finish"))?;
             tracing::info!(messages = n, dropped = lost, rejected, "recording finished");
         }
         Ok(())

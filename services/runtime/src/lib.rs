@@ -40,6 +40,7 @@ pub mod stats;
 use std::time::Duration;
 
 use iceoryx2::prelude::*;
+pub use iceoryx2::service::{ipc, local, Service};
 use ipc_types::{Clock, RunChannel};
 
 pub use domain::{
@@ -121,46 +122,61 @@ pub struct RunArgs {
     pub resume: Option<std::path::PathBuf>,
 }
 
-/// Errors of the runtime.
+/// An error of iceoryx2 (each operation has its own type), kept whole as
+/// the source of a [`RuntimeError`].
+pub type IoxError = Box<dyn std::error::Error + Send + Sync>;
+
+/// Errors of the runtime: one variant per operation, naming what it was
+/// done on, with iceoryx2's error as the source.
 #[derive(Debug, thiserror::Error)]
 pub enum RuntimeError {
     /// The iceoryx2 node could not be created.
-    #[error("cannot create the iceoryx2 node `{name}`: {reason}")]
+    #[error("cannot create the iceoryx2 node `{name}`")]
     Node {
         /// Node name.
         name: String,
         /// Cause.
-        reason: String,
+        #[source]
+        source: IoxError,
     },
     /// A service could not be opened or created.
-    #[error("cannot open service `{service}`: {reason}")]
+    #[error("cannot open service `{service}`")]
     Service {
         /// Service name.
         service: String,
         /// Cause.
-        reason: String,
+        #[source]
+        source: IoxError,
     },
     /// A port could not be created.
-    #[error("cannot create a port on `{service}`: {reason}")]
+    #[error("cannot create a port on `{service}`")]
     Port {
         /// Service name.
         service: String,
         /// Cause.
-        reason: String,
+        #[source]
+        source: IoxError,
     },
     /// Sending or receiving failed.
-    #[error("i/o on `{service}` failed: {reason}")]
+    #[error("i/o on `{service}` failed")]
     Io {
         /// Service name.
         service: String,
         /// Cause.
-        reason: String,
+        #[source]
+        source: IoxError,
     },
-    /// The wait set failed.
-    #[error("waiting failed: {0}")]
-    Wait(String),
+    /// A sample with a NaN or infinite value was not published.
+    #[error("refused to publish a sample with a non-finite value on `{service}`")]
+    NonFinite {
+        /// Service name.
+        service: String,
+    },
+    /// The wait set could not be built or waiting failed.
+    #[error("waiting for the next wake-up failed")]
+    Wait(#[source] IoxError),
     /// The task's step failed.
-    #[error("step at t = {sim_time_s:.3} s failed: {source}")]
+    #[error("step at t = {sim_time_s:.3} s failed")]
     Task {
         /// Simulation time of the failing step.
         sim_time_s: f64,
@@ -170,21 +186,48 @@ pub enum RuntimeError {
     },
 }
 
-/// An error a task's step reports; the process exits with it.
+/// Why a task's step (or its finish) failed; the process exits with it.
 #[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct TaskError(pub String);
+pub enum TaskError {
+    /// One of its ports failed.
+    #[error("a port failed")]
+    Port(#[source] Box<RuntimeError>),
+    /// Its library refused the inputs or could not compute: `what` names
+    /// the operation (`planner step`, `recording write`).
+    #[error("{what} failed")]
+    Failed {
+        /// The operation.
+        what: &'static str,
+        /// The library's error.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// An input it cannot work with.
+    #[error("{input}: {reason}")]
+    BadInput {
+        /// The input (channel or field).
+        input: &'static str,
+        /// What is wrong with it.
+        reason: String,
+    },
+}
 
 impl TaskError {
-    /// Wraps any displayable error.
-    pub fn from_display(e: impl std::fmt::Display) -> Self {
-        TaskError(e.to_string())
+    /// `map_err(TaskError::failed("planner step"))`: wraps a library error
+    /// as the failure of operation `what`.
+    pub fn failed<E: std::error::Error + Send + Sync + 'static>(
+        what: &'static str,
+    ) -> impl FnOnce(E) -> TaskError {
+        move |e| TaskError::Failed {
+            what,
+            source: Box::new(e),
+        }
     }
 }
 
 impl From<RuntimeError> for TaskError {
     fn from(e: RuntimeError) -> Self {
-        TaskError(e.to_string())
+        TaskError::Port(Box::new(e))
     }
 }
 
@@ -259,16 +302,29 @@ pub fn init_tracing() {
         .try_init();
 }
 
-/// One process's connection to its run: the node and the clock ports.
-pub struct Runtime {
-    node: Node<ipc::Service>,
+/// One process's connection to its run: the node and the clock ports, over
+/// iceoryx2 service kind `S`: shared memory between processes
+/// (`ipc::Service`, what every service binary uses), or `local::Service`,
+/// inside one process, so that a test can wire several tasks together.
+pub struct Runtime<S: Service = ipc::Service> {
+    node: Node<S>,
     args: RunArgs,
 }
 
 impl Runtime {
-    /// Creates the node `<vehicle>/<process>` in the run's domain.
+    /// Creates the node `<vehicle>/<process>` in the run's domain, over
+    /// shared memory (what every service binary does).
     pub fn new(args: &RunArgs) -> Result<Self, RuntimeError> {
-        let node = domain_node(&args.run_id, &format!("{}/{}", args.vehicle, args.process))?;
+        Self::open(args)
+    }
+}
+
+impl<S: Service> Runtime<S> {
+    /// [`Runtime::new`] over any iceoryx2 service kind:
+    /// `Runtime::<local::Service>::open(args)` in a test.
+    pub fn open(args: &RunArgs) -> Result<Self, RuntimeError> {
+        let node =
+            domain_node_of::<S>(&args.run_id, &format!("{}/{}", args.vehicle, args.process))?;
         Ok(Self {
             node,
             args: args.clone(),
@@ -276,7 +332,7 @@ impl Runtime {
     }
 
     /// The iceoryx2 node (for opening extra services).
-    pub fn node(&self) -> &Node<ipc::Service> {
+    pub fn node(&self) -> &Node<S> {
         &self.node
     }
 
@@ -290,7 +346,7 @@ impl Runtime {
         &self,
         service: &str,
         limits: &ChannelLimits,
-    ) -> Result<Publisher<T>, RuntimeError> {
+    ) -> Result<Publisher<T, S>, RuntimeError> {
         Publisher::open(&self.node, service, limits)
     }
 
@@ -300,7 +356,7 @@ impl Runtime {
         service: &str,
         limits: &ChannelLimits,
         buffer: usize,
-    ) -> Result<Subscriber<T>, RuntimeError> {
+    ) -> Result<Subscriber<T, S>, RuntimeError> {
         Subscriber::open(&self.node, service, limits, buffer, self.args.mode)
     }
 
@@ -308,7 +364,10 @@ impl Runtime {
     ///
     /// Either way the process's statistics are published on the run's
     /// `stats` channel once a second and written to its stats file at exit.
-    pub fn run<T: Task>(self, task: T) -> Result<RunReport, RuntimeError> {
+    pub fn run<T: Task>(self, task: T) -> Result<RunReport, RuntimeError>
+    where
+        iceoryx2::port::listener::Listener<S>: SynchronousMultiplexing,
+    {
         let mut stats = stats::StatsReporter::new(&self.node, &self.args);
         let mut report = RunReport::default();
         let result = match self.args.mode {
@@ -321,9 +380,7 @@ impl Runtime {
         result.map(|()| report)
     }
 
-    fn done_notifier(
-        &self,
-    ) -> Result<iceoryx2::port::notifier::Notifier<ipc::Service>, RuntimeError> {
+    fn done_notifier(&self) -> Result<iceoryx2::port::notifier::Notifier<S>, RuntimeError> {
         let name = ipc_types::run_service_name(&self.args.run_id, RunChannel::Done);
         open_done(&self.node, &self.args.run_id, self.args.processes)?
             .notifier_builder()
@@ -331,7 +388,7 @@ impl Runtime {
             .create()
             .map_err(|e| RuntimeError::Port {
                 service: name,
-                reason: format!("{e:?}"),
+                source: Box::new(e),
             })
     }
 
@@ -340,7 +397,7 @@ impl Runtime {
     /// step's, so a restarted process's "ready" is never taken for a step).
     fn notify_ready(
         &self,
-        done: &iceoryx2::port::notifier::Notifier<ipc::Service>,
+        done: &iceoryx2::port::notifier::Notifier<S>,
     ) -> Result<(), RuntimeError> {
         done.notify_with_custom_event_id(EventId::new(ready_event_id(
             self.args.index,
@@ -349,16 +406,19 @@ impl Runtime {
         .map(|_| ())
         .map_err(|e| RuntimeError::Io {
             service: "done".into(),
-            reason: format!("{e:?}"),
+            source: Box::new(e),
         })
     }
 
     fn run_lockstep<T: Task>(
         &self,
         mut task: T,
-        stats: &mut stats::StatsReporter,
+        stats: &mut stats::StatsReporter<S>,
         report: &mut RunReport,
-    ) -> Result<(), RuntimeError> {
+    ) -> Result<(), RuntimeError>
+    where
+        iceoryx2::port::listener::Listener<S>: SynchronousMultiplexing,
+    {
         let wake_name =
             ipc_types::wake_service_name(&self.args.run_id, &self.args.vehicle, &self.args.process);
         let wake_service = open_wake(
@@ -372,11 +432,11 @@ impl Runtime {
             .create()
             .map_err(|e| RuntimeError::Port {
                 service: wake_name.clone(),
-                reason: format!("{e:?}"),
+                source: Box::new(e),
             })?;
         let clock_name = ipc_types::run_service_name(&self.args.run_id, RunChannel::Clock);
         let clock_limits = ChannelLimits::clock(self.args.processes);
-        let clock: Subscriber<Clock> = Subscriber::open(
+        let clock: Subscriber<Clock, S> = Subscriber::open(
             &self.node,
             &clock_name,
             &clock_limits,
@@ -391,17 +451,17 @@ impl Runtime {
 
         let waitset = WaitSetBuilder::new()
             .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<ipc::Service>()
-            .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
+            .create::<S>()
+            .map_err(|e| RuntimeError::Wait(Box::new(e)))?;
         let guard = waitset
             .attach_notification(&wake)
-            .map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
+            .map_err(|e| RuntimeError::Wait(Box::new(e)))?;
         let mut last_sim: Option<u64> = None;
         let mut failure: Option<RuntimeError> = None;
         let mut clock = clock;
         let mut latest_clock: Option<Clock> = None;
         let spin_ns = self.args.spin_us * 1_000;
-        let on_event = |id: WaitSetAttachmentId<ipc::Service>| {
+        let on_event = |id: WaitSetAttachmentId<S>| {
             if !id.has_event_from(&guard) {
                 return CallbackProgression::Continue;
             }
@@ -452,7 +512,7 @@ impl Runtime {
                 if let Err(e) = done.notify() {
                     failure = Some(RuntimeError::Io {
                         service: "done".into(),
-                        reason: format!("{e:?}"),
+                        source: Box::new(e),
                     });
                     return CallbackProgression::Stop;
                 }
@@ -474,7 +534,7 @@ impl Runtime {
         if let Some(e) = failure {
             return Err(e);
         }
-        result.map_err(|e| RuntimeError::Wait(format!("{e:?}")))?;
+        result.map_err(|e| RuntimeError::Wait(Box::new(e)))?;
         finish.map_err(|source| RuntimeError::Task {
             sim_time_s: last_sim.unwrap_or(0) as f64 * 1e-9,
             source,
@@ -491,7 +551,7 @@ impl Runtime {
     fn run_realtime<T: Task>(
         &self,
         mut task: T,
-        stats: &mut stats::StatsReporter,
+        stats: &mut stats::StatsReporter<S>,
         report: &mut RunReport,
     ) -> Result<(), RuntimeError> {
         let done = self.done_notifier()?;
@@ -562,7 +622,7 @@ impl Runtime {
 pub(crate) fn service_name(name: &str) -> Result<ServiceName, RuntimeError> {
     ServiceName::new(name).map_err(|e| RuntimeError::Service {
         service: name.to_string(),
-        reason: format!("{e:?}"),
+        source: Box::new(e),
     })
 }
 
@@ -587,11 +647,11 @@ pub const fn ready_event_id(index: usize, processes: usize) -> usize {
 
 /// Opens the `done` event service of a run (same limits for every opener):
 /// ids `0..processes` are finished steps, `processes..2·processes` readies.
-pub fn open_done(
-    node: &Node<ipc::Service>,
+pub fn open_done<S: Service>(
+    node: &Node<S>,
     run_id: &str,
     processes: usize,
-) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, RuntimeError> {
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<S>, RuntimeError> {
     let name = ipc_types::run_service_name(run_id, RunChannel::Done);
     let limits = ChannelLimits::done(processes);
     node.service_builder(&service_name(&name)?)
@@ -603,17 +663,17 @@ pub fn open_done(
         .open_or_create()
         .map_err(|e| RuntimeError::Service {
             service: name,
-            reason: format!("{e:?}"),
+            source: Box::new(e),
         })
 }
 
 /// Opens one process's lockstep wake-up event service.
-pub fn open_wake(
-    node: &Node<ipc::Service>,
+pub fn open_wake<S: Service>(
+    node: &Node<S>,
     run_id: &str,
     vehicle: &str,
     process: &str,
-) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, RuntimeError> {
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<S>, RuntimeError> {
     let name = ipc_types::wake_service_name(run_id, vehicle, process);
     node.service_builder(&service_name(&name)?)
         .event()
@@ -623,43 +683,48 @@ pub fn open_wake(
         .open_or_create()
         .map_err(|e| RuntimeError::Service {
             service: name,
-            reason: format!("{e:?}"),
+            source: Box::new(e),
         })
 }
 
 /// Creates a node in a run's domain (the orchestrator's, a test's, a replayer's).
 pub fn domain_node(run_id: &str, name: &str) -> Result<Node<ipc::Service>, RuntimeError> {
+    domain_node_of::<ipc::Service>(run_id, name)
+}
+
+/// [`domain_node`] over any iceoryx2 service kind.
+pub fn domain_node_of<S: Service>(run_id: &str, name: &str) -> Result<Node<S>, RuntimeError> {
     let config = iceoryx_config(run_id);
     let node_name = NodeName::new(name).map_err(|e| RuntimeError::Node {
         name: name.to_string(),
-        reason: format!("{e:?}"),
+        source: Box::new(e),
     })?;
     NodeBuilder::new()
         .name(&node_name)
         .config(&config)
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-        .create::<ipc::Service>()
+        .create::<S>()
         .map_err(|e| RuntimeError::Node {
             name: name.to_string(),
-            reason: format!("{e:?}"),
+            source: Box::new(e),
         })
 }
 
 /// Opens a publisher on a node that is not a [`Runtime`] (the orchestrator's clock).
-pub fn node_publisher<T: ipc_types::Sample>(
-    node: &Node<ipc::Service>,
+pub fn node_publisher<T: ipc_types::Sample, S: Service>(
+    node: &Node<S>,
     service: &str,
     limits: &ChannelLimits,
-) -> Result<Publisher<T>, RuntimeError> {
+) -> Result<Publisher<T, S>, RuntimeError> {
     Publisher::open(node, service, limits)
 }
 
 /// Opens a subscriber on a node that is not a [`Runtime`] (tests, tools).
-pub fn node_subscriber<T: ipc_types::Sample>(
-    node: &Node<ipc::Service>,
+pub fn node_subscriber<T: ipc_types::Sample, S: Service>(
+    node: &Node<S>,
     service: &str,
     limits: &ChannelLimits,
     buffer: usize,
-) -> Result<Subscriber<T>, RuntimeError> {
+) -> Result<Subscriber<T, S>, RuntimeError> {
     Subscriber::open(node, service, limits, buffer, Mode::Realtime)
 }

@@ -10,6 +10,7 @@ use iceoryx2::port::publisher::Publisher as IoxPublisher;
 use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
+use iceoryx2::service::Service;
 use ipc_types::{Header, Sample};
 
 use crate::domain::ChannelLimits;
@@ -109,14 +110,12 @@ impl Origin {
     }
 }
 
-fn open_pubsub<T: Sample>(
-    node: &Node<ipc::Service>,
+fn open_pubsub<T: Sample, S: Service>(
+    node: &Node<S>,
     service: &str,
     limits: &ChannelLimits,
-) -> Result<
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
-    RuntimeError,
-> {
+) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<S, T, ()>, RuntimeError>
+{
     let name = service_name(service)?;
     // Two processes opening a new service at once race inside
     // `open_or_create` (one sees it half-created: `DoesNotExist` or
@@ -143,7 +142,7 @@ fn open_pubsub<T: Sample>(
             Err(e) => {
                 return Err(RuntimeError::Service {
                     service: service.to_string(),
-                    reason: format!("{e:?}"),
+                    source: Box::new(e),
                 })
             }
         }
@@ -170,28 +169,30 @@ fn transient(e: &PublishSubscribeOpenOrCreateError) -> bool {
     )
 }
 
-/// A publisher of one sample type on one service.
-pub struct Publisher<T: Sample> {
-    inner: IoxPublisher<ipc::Service, T, ()>,
-    factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+/// A publisher of one sample type on one service, over iceoryx2 service
+/// kind `S` (shared memory between processes by default; `local::Service`
+/// inside one process, for tests).
+pub struct Publisher<T: Sample, S: Service = ipc::Service> {
+    inner: IoxPublisher<S, T, ()>,
+    factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<S, T, ()>,
     service: String,
     seq: u64,
 }
 
-impl<T: Sample> Publisher<T> {
+impl<T: Sample, S: Service> Publisher<T, S> {
     pub(crate) fn open(
-        node: &Node<ipc::Service>,
+        node: &Node<S>,
         service: &str,
         limits: &ChannelLimits,
     ) -> Result<Self, RuntimeError> {
-        let factory = open_pubsub::<T>(node, service, limits)?;
+        let factory = open_pubsub::<T, S>(node, service, limits)?;
         let inner = factory
             .publisher_builder()
             .max_loaned_samples(2)
             .create()
             .map_err(|e| RuntimeError::Port {
                 service: service.to_string(),
-                reason: format!("{e:?}"),
+                source: Box::new(e),
             })?;
         Ok(Self {
             inner,
@@ -221,9 +222,8 @@ impl<T: Sample> Publisher<T> {
         origin: Origin,
     ) -> Result<(), RuntimeError> {
         if !sample.is_finite() {
-            return Err(RuntimeError::Io {
+            return Err(RuntimeError::NonFinite {
                 service: self.service.clone(),
-                reason: "refused to publish a sample with a non-finite value".into(),
             });
         }
         // Read the clock before touching shared memory: the clock read
@@ -250,7 +250,7 @@ impl<T: Sample> Publisher<T> {
     fn send_error(&self, e: iceoryx2::port::SendError) -> RuntimeError {
         RuntimeError::Io {
             service: self.service.clone(),
-            reason: format!("{e:?}"),
+            source: Box::new(e),
         }
     }
 
@@ -264,7 +264,7 @@ impl<T: Sample> Publisher<T> {
             .update_connections()
             .map_err(|e| RuntimeError::Io {
                 service: self.service.clone(),
-                reason: format!("{e:?}"),
+                source: Box::new(e),
             })
     }
 
@@ -278,9 +278,10 @@ impl<T: Sample> Publisher<T> {
     }
 }
 
-/// A subscriber of one sample type on one service.
-pub struct Subscriber<T: Sample> {
-    inner: IoxSubscriber<ipc::Service, T, ()>,
+/// A subscriber of one sample type on one service, over iceoryx2 service
+/// kind `S` (see [`Publisher`]).
+pub struct Subscriber<T: Sample, S: Service = ipc::Service> {
+    inner: IoxSubscriber<S, T, ()>,
     service: String,
     mode: Mode,
     held: VecDeque<T>,
@@ -295,22 +296,22 @@ pub struct Subscriber<T: Sample> {
     hops: Rc<RefCell<HopEntry>>,
 }
 
-impl<T: Sample> Subscriber<T> {
+impl<T: Sample, S: Service> Subscriber<T, S> {
     pub(crate) fn open(
-        node: &Node<ipc::Service>,
+        node: &Node<S>,
         service: &str,
         limits: &ChannelLimits,
         buffer: usize,
         mode: Mode,
     ) -> Result<Self, RuntimeError> {
-        let factory = open_pubsub::<T>(node, service, limits)?;
+        let factory = open_pubsub::<T, S>(node, service, limits)?;
         let inner = factory
             .subscriber_builder()
             .buffer_size(buffer.clamp(1, limits.max_buffer))
             .create()
             .map_err(|e| RuntimeError::Port {
                 service: service.to_string(),
-                reason: format!("{e:?}"),
+                source: Box::new(e),
             })?;
         Ok(Self {
             inner,
@@ -364,7 +365,7 @@ impl<T: Sample> Subscriber<T> {
         loop {
             let received = self.inner.receive().map_err(|e| RuntimeError::Io {
                 service: self.service.clone(),
-                reason: format!("{e:?}"),
+                source: Box::new(e),
             })?;
             let Some(sample) = received else {
                 return Ok(());
@@ -523,8 +524,8 @@ mod tests {
         let node = crate::domain_node(&run, "ports-test").unwrap();
         let service = format!("shoal/{run}/V/nav");
         let limits = ChannelLimits::vehicle();
-        let mut a = crate::node_publisher::<Nav>(&node, &service, &limits).unwrap();
-        let mut b = crate::node_publisher::<Nav>(&node, &service, &limits).unwrap();
+        let mut a = crate::node_publisher::<Nav, _>(&node, &service, &limits).unwrap();
+        let mut b = crate::node_publisher::<Nav, _>(&node, &service, &limits).unwrap();
         let mut sub =
             Subscriber::<Nav>::open(&node, &service, &limits, 16, Mode::Lockstep).unwrap();
 

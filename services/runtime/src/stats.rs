@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use iceoryx2::prelude::*;
+use iceoryx2::service::Service;
 use ipc_types::{fixed_str, HopStats, ProcessStats, RunChannel, Sample};
 use serde::{Deserialize, Serialize};
 
@@ -111,8 +112,8 @@ pub fn stats_limits(processes: usize) -> ChannelLimits {
 }
 
 /// Collects and reports one process's statistics.
-pub(crate) struct StatsReporter {
-    publisher: Option<Publisher<ProcessStats>>,
+pub(crate) struct StatsReporter<S: Service> {
+    publisher: Option<Publisher<ProcessStats, S>>,
     vehicle: String,
     process: String,
     run_id: String,
@@ -121,8 +122,8 @@ pub(crate) struct StatsReporter {
     next_ns: u64,
 }
 
-impl StatsReporter {
-    pub(crate) fn new(node: &Node<ipc::Service>, args: &RunArgs) -> Self {
+impl<S: Service> StatsReporter<S> {
+    pub(crate) fn new(node: &Node<S>, args: &RunArgs) -> Self {
         let service = ipc_types::run_service_name(&args.run_id, RunChannel::Stats);
         let publisher = Publisher::open(node, &service, &stats_limits(args.processes))
             .map_err(

@@ -115,7 +115,7 @@ impl Task for PlantTask {
             for _ in 0..steps.min(MAX_CATCH_UP_STEPS) {
                 self.plant
                     .advance(&self.tau, self.period_s)
-                    .map_err(TaskError::from_display)?;
+                    .map_err(TaskError::failed("plant step"))?;
             }
         }
         if let Some(t) = self.thrust_in.latest(ctx)? {
@@ -159,7 +159,7 @@ impl Task for PlantTask {
         if dt > 0.0 {
             self.plant
                 .advance(&self.tau, dt)
-                .map_err(TaskError::from_display)?;
+                .map_err(TaskError::failed("plant step"))?;
         }
         Ok(())
     }
