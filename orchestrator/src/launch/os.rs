@@ -254,3 +254,86 @@ pub fn user_processes(uid: u32) -> u64 {
         .filter(|e| e.metadata().is_ok_and(|m| m.uid() == uid))
         .count() as u64
 }
+
+// What `shoal bench scale` reads of the run's processes (/proc).
+
+/// Resets this process's peak RSS (`VmHWM`) to its current RSS, so the
+/// next reading is the peak of the coming run; false if the kernel refused.
+pub fn reset_own_peak_rss() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
+/// One process's memory as `/proc/PID/status` gives it, KiB.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MemReading {
+    /// Peak resident set (`VmHWM`).
+    pub hwm_kib: i64,
+    /// Private anonymous pages now (`RssAnon`).
+    pub anon_kib: i64,
+}
+
+/// Reads `VmHWM` and `RssAnon` out of a `/proc/PID/status` text.
+pub fn parse_status(text: &str) -> Option<MemReading> {
+    let field = |name: &str| {
+        shoal_runtime::stats::proc_status_kib(text, name).and_then(|k| i64::try_from(k).ok())
+    };
+    Some(MemReading {
+        hwm_kib: field("VmHWM:")?,
+        anon_kib: field("RssAnon:").unwrap_or(0),
+    })
+}
+
+/// The process kind of a service process from its command line (the value
+/// of `--process`); `None` for anything else, including a child between
+/// fork and exec, which still carries the orchestrator's memory.
+pub fn kind_from_cmdline(raw: &[u8]) -> Option<String> {
+    let mut args = raw.split(|&b| b == 0);
+    while let Some(a) = args.next() {
+        if a == b"--process" {
+            return args.next().map(|k| String::from_utf8_lossy(k).into_owned());
+        }
+    }
+    None
+}
+
+/// Children of this process (every thread's), from `/proc/self/task/*/children`.
+pub fn child_pids() -> Vec<i32> {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return Vec::new();
+    };
+    tasks
+        .flatten()
+        .filter_map(|t| std::fs::read_to_string(t.path().join("children")).ok())
+        .flat_map(|c| {
+            c.split_whitespace()
+                .filter_map(|p| p.parse().ok())
+                .collect::<Vec<i32>>()
+        })
+        .collect()
+}
+
+/// CPU time of the calling thread, s (`/proc/thread-self/schedstat`, or
+/// `stat` at 100 ticks per second).
+pub fn thread_cpu_s() -> f64 {
+    let schedstat = std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|t| t.split_whitespace().next()?.parse::<u64>().ok())
+        .filter(|&ns| ns > 0);
+    if let Some(ns) = schedstat {
+        return ns as f64 * 1e-9;
+    }
+    std::fs::read_to_string("/proc/thread-self/stat")
+        .ok()
+        .and_then(|t| {
+            let rest = t.rsplit_once(')')?.1;
+            let f: Vec<&str> = rest.split_whitespace().collect();
+            let ticks = f.get(11)?.parse::<u64>().ok()? + f.get(12)?.parse::<u64>().ok()?;
+            Some(ticks as f64 / 100.0)
+        })
+        .unwrap_or(0.0)
+}
+
+/// This process's `VmHWM` and `RssAnon`.
+pub fn own_memory() -> Option<MemReading> {
+    parse_status(&std::fs::read_to_string("/proc/self/status").ok()?)
+}

@@ -1,0 +1,94 @@
+//! The memory sampler: a thread that reads every child's `/proc` status
+//! while a run goes.
+
+use super::*;
+use crate::launch::os::{child_pids, kind_from_cmdline, parse_status, thread_cpu_s, MemReading};
+
+/// How often the memory sampler reads the run's processes.
+pub(crate) const MEM_SAMPLE_PERIOD: Duration = Duration::from_millis(200);
+
+/// The highest readings of every service process seen, by pid.
+#[derive(Debug, Default)]
+pub(crate) struct MemPeaks {
+    /// pid → (kind, highest `VmHWM`, highest `RssAnon`).
+    pub(crate) procs: HashMap<i32, (String, MemReading)>,
+    /// Sweeps over the children taken.
+    pub(crate) sweeps: u64,
+    /// CPU time of the sampler thread, s.
+    pub(crate) sampler_cpu_s: f64,
+}
+
+impl MemPeaks {
+    /// Reads every child of this process once.
+    pub(crate) fn sweep(&mut self) {
+        self.sweeps += 1;
+        for pid in child_pids() {
+            let Ok(text) = std::fs::read_to_string(format!("/proc/{pid}/status")) else {
+                continue;
+            };
+            let Some(r) = parse_status(&text) else {
+                continue;
+            };
+            let entry = match self.procs.entry(pid) {
+                std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+                std::collections::hash_map::Entry::Vacant(v) => {
+                    let Some(kind) = std::fs::read(format!("/proc/{pid}/cmdline"))
+                        .ok()
+                        .and_then(|c| kind_from_cmdline(&c))
+                    else {
+                        continue;
+                    };
+                    v.insert((kind, MemReading::default()))
+                }
+            };
+            entry.1.hwm_kib = entry.1.hwm_kib.max(r.hwm_kib);
+            entry.1.anon_kib = entry.1.anon_kib.max(r.anon_kib);
+        }
+    }
+
+    /// `(peak RSS, peak private)` summed per kind, KiB.
+    pub(crate) fn by_kind(&self) -> (BTreeMap<String, i64>, BTreeMap<String, i64>) {
+        let mut rss: BTreeMap<String, i64> = BTreeMap::new();
+        let mut private: BTreeMap<String, i64> = BTreeMap::new();
+        for (kind, r) in self.procs.values() {
+            *rss.entry(kind.clone()).or_default() += r.hwm_kib;
+            *private.entry(kind.clone()).or_default() += r.anon_kib;
+        }
+        (rss, private)
+    }
+}
+
+/// A thread that sweeps the run's processes every [`MEM_SAMPLE_PERIOD`]:
+/// `VmHWM` is the peak of the process's own address space since its exec
+/// (the `ru_maxrss` that `wait4` reports also counts the orchestrator's
+/// memory that the child held between fork and exec).
+pub(crate) struct MemSampler {
+    pub(crate) stop: Arc<AtomicBool>,
+    pub(crate) handle: std::thread::JoinHandle<MemPeaks>,
+}
+
+impl MemSampler {
+    pub(crate) fn start() -> anyhow::Result<Self> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = Arc::clone(&stop);
+        let handle = std::thread::Builder::new()
+            .name("mem-sampler".into())
+            .spawn(move || {
+                let mut peaks = MemPeaks::default();
+                while !flag.load(Ordering::Relaxed) {
+                    peaks.sweep();
+                    std::thread::park_timeout(MEM_SAMPLE_PERIOD);
+                }
+                peaks.sampler_cpu_s = thread_cpu_s();
+                peaks
+            })
+            .context("cannot start the memory sampler thread")?;
+        Ok(Self { stop, handle })
+    }
+
+    pub(crate) fn finish(self) -> MemPeaks {
+        self.stop.store(true, Ordering::Relaxed);
+        self.handle.thread().unpark();
+        self.handle.join().unwrap_or_default()
+    }
+}
