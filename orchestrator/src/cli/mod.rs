@@ -1,10 +1,16 @@
 //! The command line: one file per command, each holding its clap arguments
-//! and its printing; the work is in the library's other folders.
+//! and its printing; the work is in the library's other folders. The
+//! benchmarks are the exception: each module of [`crate::bench`] is a whole
+//! command whose only product is what it prints, so it keeps its arguments
+//! and its tables, and this file only names them.
 
 mod check;
 mod compare;
+mod export;
+mod gen;
 mod inspect;
 mod recover;
+mod replay;
 mod run;
 
 use std::path::PathBuf;
@@ -14,7 +20,7 @@ use clap::{Parser, Subcommand};
 
 pub use run::ProcessArgs;
 
-use crate::{bench, export, gen, launch, replay};
+use crate::{bench, launch};
 
 /// Leader–follower AUV formations as multi-process soft-real-time software.
 #[derive(Debug, Parser)]

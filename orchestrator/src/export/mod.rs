@@ -41,7 +41,7 @@ mod scene;
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
-use std::io::{BufWriter, IsTerminal, Write};
+use std::io::{BufWriter, IsTerminal};
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -55,61 +55,38 @@ use scene::{ScanView, SlotView, TruePose, VehicleLook};
 
 use crate::analysis::track::{unit_wxyz, Track};
 
-/// Arguments of `shoal export`.
-#[derive(Debug, clap::Args)]
-#[command(after_help = "\
-Channels written (Foxglove JSON, official schemas embedded):
-  /tf                    foxglove.FrameTransforms  world (ENU) -> ned -> <V>/body, <V>/level
-  /scene/obstacles       foxglove.SceneUpdate      scenario obstacles, in ned
-  /scene/vehicles        foxglove.SceneUpdate      hull, heading arrow, name, beacons
-  /scene/slots           foxglove.SceneUpdate      each follower's slot in its parent's level frame
-  /scene/sonar           foxglove.SceneUpdate      sonar beams, red to the echo
-  /scene/line_of_sight   foxglove.SceneUpdate      camera -> parent's beacons, green seen / red not
-  /<V>/pose              foxglove.PoseInFrame      true pose, in ned
-  /<F>/parent_estimate   foxglove.PoseInFrame      the parent as the camera estimated it
-Times are the recording's simulation time (the view starts at 1970-01-01 00:00:00).")]
-pub struct ExportCmd {
-    /// The shoal recording (MCAP), e.g. runs/paper-<time>/recording.mcap.
-    pub recording: PathBuf,
-    /// Write a Foxglove-ready MCAP here: obstacles, vehicles, slots, sonar
-    /// beams and the camera's line of sight as foxglove.SceneUpdate,
-    /// frames as foxglove.FrameTransforms, poses as foxglove.PoseInFrame
-    /// (JSON). Open it in Foxglove and pick the `world` frame (ENU, z up).
-    #[arg(long, value_name = "OUT")]
-    pub foxglove: PathBuf,
-    /// Replace OUT if it exists (it is refused otherwise).
-    #[arg(long)]
-    pub force: bool,
-    /// No progress bar and no closing table.
-    #[arg(long, short)]
-    pub quiet: bool,
-}
-
-/// Runs `shoal export`.
-pub fn run(cmd: ExportCmd) -> anyhow::Result<()> {
-    let out = &cmd.foxglove;
+/// Converts the recording at `recording` into a Foxglove MCAP at `out`:
+/// written beside it first and moved into place only when complete, so a
+/// failure leaves nothing; an existing `out` is replaced only with `force`
+/// and never when it is the input.
+pub fn export_to_file(
+    recording: &Path,
+    out: &Path,
+    force: bool,
+    progress: bool,
+) -> anyhow::Result<ExportReport> {
     if out.exists() {
-        if !cmd.force {
+        if !force {
             anyhow::bail!("{} exists: pass --force to replace it", out.display());
         }
-        if same_file(out, &cmd.recording) {
+        if same_file(out, recording) {
             anyhow::bail!(
                 "{} is the input recording: choose another output",
                 out.display()
             );
         }
     }
-    let rec = recordings::Recording::open(&cmd.recording)?;
+    let rec = recordings::Recording::open(recording)?;
     if rec.truncated() {
         tracing::warn!(
             "{} is truncated: exporting up to its last complete chunk",
-            cmd.recording.display()
+            recording.display()
         );
     }
     let partial = partial_path(out);
     let result = File::create(&partial)
         .with_context(|| format!("cannot create {}", partial.display()))
-        .and_then(|f| export_foxglove(&rec, BufWriter::with_capacity(1 << 20, f), !cmd.quiet));
+        .and_then(|f| export_foxglove(&rec, BufWriter::with_capacity(1 << 20, f), progress));
     let report = match result {
         Ok(r) => r,
         Err(e) => {
@@ -120,17 +97,7 @@ pub fn run(cmd: ExportCmd) -> anyhow::Result<()> {
     };
     std::fs::rename(&partial, out)
         .with_context(|| format!("cannot move {} to {}", partial.display(), out.display()))?;
-    for n in &report.notes {
-        tracing::warn!("{n}");
-    }
-    if !cmd.quiet {
-        match report.print(out) {
-            // A closed pipe (`| head`) is the reader's choice, not an error.
-            Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => return Err(e.into()),
-            _ => {}
-        }
-    }
-    Ok(())
+    Ok(report)
 }
 
 fn same_file(a: &Path, b: &Path) -> bool {
@@ -161,25 +128,6 @@ impl ExportReport {
     /// Total messages.
     pub fn messages(&self) -> u64 {
         self.channels.iter().map(|c| c.2).sum()
-    }
-
-    /// Prints the closing table on stdout.
-    fn print(&self, out: &Path) -> std::io::Result<()> {
-        let mut o = std::io::stdout().lock();
-        writeln!(
-            o,
-            "{}: {} messages on {} channels, {:.1} s .. {:.1} s (sim time)",
-            out.display(),
-            self.messages(),
-            self.channels.len(),
-            self.span_ns.0 as f64 * 1e-9,
-            self.span_ns.1 as f64 * 1e-9
-        )?;
-        writeln!(o, "{:<26} {:<26} {:>8}", "topic", "schema", "messages")?;
-        for (topic, schema, n) in &self.channels {
-            writeln!(o, "{topic:<26} {schema:<26} {n:>8}")?;
-        }
-        Ok(())
     }
 }
 
@@ -637,25 +585,13 @@ radius_m = 2.0
         write_recording(&rec, true);
         let out = dir.path().join("view.mcap");
         std::fs::write(&out, b"old").unwrap();
-        let cmd = |force| ExportCmd {
-            recording: rec.clone(),
-            foxglove: out.clone(),
-            force,
-            quiet: true,
-        };
-        let e = run(cmd(false)).unwrap_err();
+        let e = export_to_file(&rec, &out, false, false).unwrap_err();
         assert!(e.to_string().contains("--force"), "{e}");
         assert_eq!(std::fs::read(&out).unwrap(), b"old");
-        run(cmd(true)).unwrap();
+        export_to_file(&rec, &out, true, false).unwrap();
         assert_ne!(std::fs::read(&out).unwrap(), b"old");
         assert!(!partial_path(&out).exists());
-        let e = run(ExportCmd {
-            recording: rec.clone(),
-            foxglove: rec.clone(),
-            force: true,
-            quiet: true,
-        })
-        .unwrap_err();
+        let e = export_to_file(&rec, &rec, true, false).unwrap_err();
         assert!(e.to_string().contains("input recording"), "{e}");
     }
 }

@@ -24,39 +24,28 @@ use crate::launch::os as sys;
 use crate::launch::supervisor::Supervisor;
 use crate::launch::{wait_done, wait_ready, Ports};
 
-/// Arguments of `shoal replay`.
-#[derive(Debug, clap::Args)]
-pub struct ReplayCmd {
-    /// The recording (MCAP written by `shoal run`).
-    pub recording: PathBuf,
-    /// Playback speed against the recording's simulated time (2 = twice as
-    /// fast); 0 = as fast as possible.
-    #[arg(long, default_value_t = 1.0)]
+/// How `play` replays a recording.
+#[derive(Debug, Clone)]
+pub struct PlayOptions {
+    /// Playback speed against simulated time; 0 = as fast as possible.
     pub speed: f64,
     /// Run id of the new domain (default: a fresh one, printed).
-    #[arg(long)]
     pub run_id: Option<String>,
-    /// Before playing, wait (up to 60 s) until this many subscribers are
-    /// connected to the replayed channels.
-    #[arg(long, default_value_t = 0)]
+    /// Wait (up to 60 s) for this many subscribers before playing.
     pub wait_subscribers: usize,
-    /// Re-run this process kind (sim-plant, world, camera-pose, sonar,
-    /// planner, mpc) alone on its recorded inputs and compare its outputs.
-    #[arg(long)]
-    pub rerun: Option<String>,
-    /// The vehicle whose process is re-run (not needed for `world`).
-    #[arg(long)]
+}
+
+/// Which process `rerun` re-runs, and how.
+#[derive(Debug, Clone)]
+pub struct RerunOptions {
+    /// Process kind (sim-plant, world, camera-pose, sonar, planner, mpc).
+    pub kind: String,
+    /// Its vehicle (not needed for `world`).
     pub vehicle: Option<String>,
-    /// Override a scenario key for the re-run, `section.key=value` in TOML
-    /// (e.g. `follower.beta=0.2`); repeatable.
-    #[arg(long = "set")]
+    /// `section.key=value` overrides of the recorded scenario.
     pub set: Vec<String>,
-    /// Directory holding the service binaries (default: next to `shoal`).
-    #[arg(long)]
+    /// Where the service binaries are (default: beside `shoal`).
     pub bin_dir: Option<PathBuf>,
-    /// Print the re-run's report as JSON.
-    #[arg(long)]
-    pub json: bool,
 }
 
 /// A publisher of any recorded sample type, fed raw recorded bytes.
@@ -123,37 +112,13 @@ fn recorded_scenario(rec: &Recording) -> anyhow::Result<Scenario> {
     Scenario::from_toml(text).context("the recorded scenario does not parse")
 }
 
-/// Runs `shoal replay`.
-pub fn run(cmd: ReplayCmd) -> anyhow::Result<()> {
-    let rec = Recording::open(&cmd.recording)
-        .with_context(|| format!("cannot read {}", cmd.recording.display()))?;
-    if rec.truncated() {
-        tracing::warn!("the recording is truncated; replaying what it holds");
-    }
-    match &cmd.rerun {
-        Some(kind) => {
-            let report = rerun(&rec, &cmd, kind)?;
-            if cmd.json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                println!("{}", report.describe());
-            }
-            if report.difference.is_some() {
-                std::process::exit(3);
-            }
-            Ok(())
-        }
-        None => play(&rec, &cmd),
-    }
-}
-
 /// Plays every recorded message, in recorded order, onto a new domain.
-fn play(rec: &Recording, cmd: &ReplayCmd) -> anyhow::Result<()> {
-    if !(cmd.speed >= 0.0 && cmd.speed.is_finite()) {
-        bail!("--speed must be ≥ 0, got {}", cmd.speed);
+pub fn play(rec: &Recording, opts: &PlayOptions) -> anyhow::Result<()> {
+    if !(opts.speed >= 0.0 && opts.speed.is_finite()) {
+        bail!("--speed must be ≥ 0, got {}", opts.speed);
     }
     let scenario = recorded_scenario(rec)?;
-    let run_id = cmd.run_id.clone().unwrap_or_else(sys::random_id);
+    let run_id = opts.run_id.clone().unwrap_or_else(sys::random_id);
     let vehicles = scenario.vehicles.len();
     let processes = scenario.processes().len();
     let node = shoal_runtime::domain_node(&run_id, "replay")?;
@@ -169,13 +134,13 @@ fn play(rec: &Recording, cmd: &ReplayCmd) -> anyhow::Result<()> {
         .with_context(|| format!("cannot open {service}"))?;
         pubs.insert(c.id, p);
     }
-    println!("replaying {} into run {run_id}", cmd.recording.display());
+    println!("replaying {} into run {run_id}", rec.path().display());
     let result = (|| -> anyhow::Result<u64> {
-        if cmd.wait_subscribers > 0 {
+        if opts.wait_subscribers > 0 {
             let start = Instant::now();
-            while pubs.values().map(|p| p.subscribers()).sum::<usize>() < cmd.wait_subscribers {
+            while pubs.values().map(|p| p.subscribers()).sum::<usize>() < opts.wait_subscribers {
                 if start.elapsed() > Duration::from_secs(60) {
-                    bail!("no {} subscriber(s) within 60 s", cmd.wait_subscribers);
+                    bail!("no {} subscriber(s) within 60 s", opts.wait_subscribers);
                 }
                 node.wait(Duration::from_millis(10))
                     .map_err(|_| anyhow::anyhow!("interrupted"))?;
@@ -185,8 +150,8 @@ fn play(rec: &Recording, cmd: &ReplayCmd) -> anyhow::Result<()> {
         let t0 = rec.messages().first().map_or(0, |m| m.log_time);
         let mut sent = 0u64;
         for m in rec.messages() {
-            if cmd.speed > 0.0 {
-                let due = Duration::from_secs_f64((m.log_time - t0) as f64 * 1e-9 / cmd.speed);
+            if opts.speed > 0.0 {
+                let due = Duration::from_secs_f64((m.log_time - t0) as f64 * 1e-9 / opts.speed);
                 if let Some(wait) = due.checked_sub(start.elapsed()) {
                     node.wait(wait)
                         .map_err(|_| anyhow::anyhow!("interrupted after {sent} messages"))?;
@@ -338,7 +303,8 @@ fn apply_overrides(scenario: &Scenario, sets: &[String]) -> anyhow::Result<Scena
 }
 
 /// Re-runs one process on its recorded inputs.
-fn rerun(rec: &Recording, cmd: &ReplayCmd, kind_name: &str) -> anyhow::Result<RerunReport> {
+pub fn rerun(rec: &Recording, opts: &RerunOptions) -> anyhow::Result<RerunReport> {
+    let kind_name = opts.kind.as_str();
     let kind = ProcessKind::ALL
         .into_iter()
         .find(|k| k.name() == kind_name && *k != ProcessKind::Recorder)
@@ -357,11 +323,11 @@ fn rerun(rec: &Recording, cmd: &ReplayCmd, kind_name: &str) -> anyhow::Result<Re
     let vehicle = if kind == ProcessKind::World {
         "run".to_string()
     } else {
-        cmd.vehicle
+        opts.vehicle
             .clone()
             .context("--vehicle is required to re-run a vehicle's process")?
     };
-    let mut scenario = apply_overrides(&base, &cmd.set)?;
+    let mut scenario = apply_overrides(&base, &opts.set)?;
     crate::preflight::resolve(&mut scenario).context("the re-run's scenario is refused")?;
     let mut spec: ProcessSpec = scenario
         .processes()
@@ -369,7 +335,7 @@ fn rerun(rec: &Recording, cmd: &ReplayCmd, kind_name: &str) -> anyhow::Result<Re
         .find(|p| p.kind == kind && p.vehicle == vehicle)
         .with_context(|| format!("no process {kind_name} of vehicle {vehicle} in the scenario"))?;
     spec.index = 0;
-    let bin_dir = crate::launch::bin_dir_or_default(cmd.bin_dir.clone())?;
+    let bin_dir = crate::launch::bin_dir_or_default(opts.bin_dir.clone())?;
     let binary = bin_dir.join(kind.binary());
     if !binary.is_file() {
         bail!("service binary {} not found", binary.display());
@@ -406,7 +372,7 @@ fn rerun(rec: &Recording, cmd: &ReplayCmd, kind_name: &str) -> anyhow::Result<Re
     drop(ports);
     shoal_runtime::cleanup_domain(&run_id);
     let mut report = result?;
-    report.overrides = cmd.set.clone();
+    report.overrides = opts.set.clone();
     let _ = std::fs::remove_dir_all(&dir);
     Ok(report)
 }
