@@ -62,7 +62,8 @@ pub struct CameraConfig {
     /// Mount rotation (roll, pitch, yaw), degrees, see the type's docs.
     /// Default `[0, 0, 0]`: looking along body +x.
     pub mount_rpy_deg: [f64; 3],
-    /// Frame rate, Hz. Default 10.
+    /// Frame rate, Hz. Default 10. A program that builds the config sets it;
+    /// in a scenario the rate is `[rates] camera_hz` and this key is refused.
     pub rate_hz: f64,
     /// Standard deviation of the Gaussian pixel noise on each coordinate, px.
     /// Default 1.0.

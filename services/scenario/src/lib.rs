@@ -73,7 +73,7 @@ fn invalid(key: impl Into<String>, reason: impl Into<String>) -> ScenarioError {
 /// settings, with where from: a scenario that sets one is refused, so that
 /// nothing a user writes is silently replaced. (The service libraries keep
 /// them as parameters, for programs that build a config directly.)
-pub const DERIVED_KEYS: [(&str, &str, &str); 7] = [
+pub const DERIVED_KEYS: [(&str, &str, &str); 9] = [
     ("mpc", "step_s", "the mpc rate, 1 / [rates] mpc_hz"),
     (
         "mpc",
@@ -93,6 +93,12 @@ pub const DERIVED_KEYS: [(&str, &str, &str); 7] = [
         "each follower's own d_b_m (assigned from the formation when absent)",
     ),
     ("mission", "d_min_m", "[safety] safe_distance_m"),
+    (
+        "camera",
+        "rate_hz",
+        "the camera-pose rate, [rates] camera_hz",
+    ),
+    ("sonar", "rate_hz", "the sonar rate, [rates] sonar_hz"),
 ];
 
 /// Rates of every process kind, and the lockstep tick.
@@ -490,6 +496,16 @@ impl Scenario {
                     ),
                 ));
             }
+        }
+        // The leader's position filter takes the nav sensor's noise when
+        // the scenario gives one: of two values for one thing, one would go unused.
+        if self.mission.contains_key("position_fix_noise_m")
+            && self.nav.contains_key("position_noise_m")
+        {
+            return Err(invalid(
+                "mission.position_fix_noise_m",
+                "the leader's filter takes [nav] position_noise_m when that is set; set one of the two",
+            ));
         }
         // The name becomes a directory name (`runs/<name>-<time>`): no paths.
         if self.name.is_empty()

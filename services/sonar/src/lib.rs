@@ -95,7 +95,8 @@ pub struct SonarConfig {
     pub range_max_m: f64,
     /// Range noise, 1σ, m (default 0.05).
     pub noise_m: f64,
-    /// Scan rate, Hz (default 10). Used by the service loop, not by [`Sonar::scan`].
+    /// Scan rate, Hz (default 10), not used by [`Sonar::scan`]. In a scenario
+    /// the rate is `[rates] sonar_hz` and this key is refused.
     pub rate_hz: f64,
     /// Transducer position in the body frame, m (default `[0.8, 0, 0]`, the nose).
     pub mount_position_body_m: [f64; 3],
