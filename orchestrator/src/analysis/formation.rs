@@ -147,17 +147,7 @@ mod tests {
     use ipc_types::{Sample, Truth};
 
     fn track(name: &str, pts: &[(u64, [f64; 3])]) -> Track {
-        let truths: Vec<Truth> = pts
-            .iter()
-            .map(|&(t, p)| {
-                let mut s = <Truth as Sample>::zeroed();
-                s.header.sim_time_ns = t;
-                s.position_ned_m = p;
-                s.q_body_to_ned_wxyz = [1.0, 0.0, 0.0, 0.0];
-                s
-            })
-            .collect();
-        Track::from_truths(name, &truths)
+        crate::analysis::track::track_through(name, pts)
     }
 
     #[test]

@@ -329,7 +329,6 @@ pub(crate) fn runtime_stats(files: &[shoal_runtime::stats::StatsFile]) -> Runtim
 mod tests {
     use super::*;
     use crate::analysis::track::{Track, MAX_GAP_NS};
-    use ipc_types::Sample;
 
     /// A leader, F1 8 m astern and 4 m to port of it, F2 10 m astern and
     /// 4 m to starboard of F1; a wall 20 m ahead of the leader's start.
@@ -372,17 +371,11 @@ yaw_deg = 0.0
 
     /// A track through `(t s, [n, e, d])` points, facing north.
     fn track(name: &str, pts: &[(f64, [f64; 3])]) -> Track {
-        let truths: Vec<Truth> = pts
+        let ns: Vec<(u64, [f64; 3])> = pts
             .iter()
-            .map(|&(t, p)| {
-                let mut s = <Truth as Sample>::zeroed();
-                s.header.sim_time_ns = (t * 1e9).round() as u64;
-                s.position_ned_m = p;
-                s.q_body_to_ned_wxyz = [1.0, 0.0, 0.0, 0.0];
-                s
-            })
+            .map(|&(t, p)| ((t * 1e9).round() as u64, p))
             .collect();
-        Track::from_truths(name, &truths)
+        crate::analysis::track::track_through(name, &ns)
     }
 
     /// Every vehicle on its slot, moving north at 1 m/s for 10 s, sampled

@@ -172,18 +172,26 @@ impl Tracks {
     }
 }
 
+/// A truth sample at `t_ns`, at `p`, facing north (for tests).
+#[cfg(test)]
+pub(crate) fn truth(t_ns: u64, p: [f64; 3]) -> Truth {
+    let mut s = <Truth as ipc_types::Sample>::zeroed();
+    s.header.sim_time_ns = t_ns;
+    s.position_ned_m = p;
+    s.q_body_to_ned_wxyz = [1.0, 0.0, 0.0, 0.0];
+    s
+}
+
+/// A track through `(t ns, p)` points, facing north (for tests).
+#[cfg(test)]
+pub(crate) fn track_through(name: &str, pts: &[(u64, [f64; 3])]) -> Track {
+    let truths: Vec<Truth> = pts.iter().map(|&(t, p)| truth(t, p)).collect();
+    Track::from_truths(name, &truths)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ipc_types::Sample;
-
-    pub(crate) fn truth(t_ns: u64, p: [f64; 3]) -> Truth {
-        let mut s = <Truth as Sample>::zeroed();
-        s.header.sim_time_ns = t_ns;
-        s.position_ned_m = p;
-        s.q_body_to_ned_wxyz = [1.0, 0.0, 0.0, 0.0];
-        s
-    }
 
     #[test]
     fn samples_are_sorted_and_unusable_ones_left_out() {
