@@ -18,7 +18,7 @@
 
 use shoal_scenario::{Perception, Scenario};
 
-use super::summary::{min_value, Summary};
+use super::summary::{fmt_or_na, min_value, Summary};
 
 /// The variants, in table order.
 pub fn variants(base: &Scenario) -> anyhow::Result<Vec<(&'static str, Scenario)>> {
@@ -47,17 +47,23 @@ pub struct Row {
     /// `method`, `acoustic` or `no_vertical_shift`.
     pub variant: String,
     /// RMS slot error before the passage, m.
-    pub slot_error_rms_before_m: f64,
+    pub slot_error_rms_before_m: Option<f64>,
     /// RMS slot error during the passage, m.
-    pub slot_error_rms_during_m: f64,
+    pub slot_error_rms_during_m: Option<f64>,
     /// RMS slot error after the passage, m.
-    pub slot_error_rms_after_m: f64,
+    pub slot_error_rms_after_m: Option<f64>,
     /// Smallest distance between two vehicles, m.
     pub min_pair_distance_m: Option<f64>,
     /// The pair it was.
     pub min_pair: String,
     /// Pairs closer than the collision distance.
     pub collisions: usize,
+    /// Vehicles' contacts with an obstacle.
+    pub obstacle_contacts: usize,
+    /// Every safety figure passed.
+    pub pass: bool,
+    /// What failed.
+    pub failed: Vec<String>,
     /// Smallest distance to an obstacle, m.
     pub min_obstacle_clearance_m: Option<f64>,
     /// Least share of a follower's frames with a fix of its parent.
@@ -67,7 +73,7 @@ pub struct Row {
     /// Least rate of fixes of any follower, Hz.
     pub min_fix_rate_hz: Option<f64>,
     /// 95th percentile of the pose error, m.
-    pub pose_error_p95_m: f64,
+    pub pose_error_p95_m: Option<f64>,
 }
 
 /// The row of variant `name` from its summary.
@@ -81,6 +87,9 @@ pub fn row(name: &str, s: &Summary) -> Row {
         min_pair_distance_m: s.safety.min_pair_distance_m,
         min_pair: s.safety.min_pair.clone(),
         collisions: s.safety.collisions,
+        obstacle_contacts: s.safety.obstacle_contacts.len(),
+        pass: s.verdict.pass,
+        failed: s.verdict.failed.clone(),
         min_obstacle_clearance_m: s.safety.min_obstacle_clearance_m,
         min_visible_fraction: min_value(&p.leader_visible_fraction),
         min_visible_fraction_in_passage: min_value(&p.parent_visible_fraction_in_passage),
@@ -89,29 +98,37 @@ pub fn row(name: &str, s: &Summary) -> Row {
     }
 }
 
-/// A markdown table of the rows.
+/// A markdown table of the rows (`n/a` for a figure that does not exist),
+/// with what failed below it.
 pub fn table(rows: &[Row], safe: f64) -> String {
     let mut t = String::from(
-        "| variant | slot rms before m | slot rms during m | slot rms after m | min pair m | collisions | min clearance m | min fix fraction | min fix fraction in passage | min fix rate Hz | pose err p95 m |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| variant | verdict | slot rms before m | slot rms during m | slot rms after m | min pair m | collisions | obstacle contacts | min clearance m | min fix fraction | min fix fraction in passage | min fix rate Hz | pose err p95 m |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
-    let nan = |x: Option<f64>| x.unwrap_or(f64::NAN);
     for r in rows {
-        let min_pair = nan(r.min_pair_distance_m);
+        let below = r.min_pair_distance_m.is_some_and(|m| m < safe);
         t.push_str(&format!(
-            "| {} | {:.2} | {:.2} | {:.2} | {:.2}{} | {} | {:.2} | {:.3} | {:.3} | {:.2} | {:.2} |\n",
+            "| {} | {} | {} | {} | {} | {}{} | {} | {} | {} | {} | {} | {} | {} |\n",
             r.variant,
-            r.slot_error_rms_before_m,
-            r.slot_error_rms_during_m,
-            r.slot_error_rms_after_m,
-            min_pair,
-            if min_pair < safe { " (below safe)" } else { "" },
+            if r.pass { "pass" } else { "FAIL" },
+            fmt_or_na(r.slot_error_rms_before_m, 2),
+            fmt_or_na(r.slot_error_rms_during_m, 2),
+            fmt_or_na(r.slot_error_rms_after_m, 2),
+            fmt_or_na(r.min_pair_distance_m, 2),
+            if below { " (below safe)" } else { "" },
             r.collisions,
-            nan(r.min_obstacle_clearance_m),
-            nan(r.min_visible_fraction),
-            nan(r.min_visible_fraction_in_passage),
-            nan(r.min_fix_rate_hz),
-            r.pose_error_p95_m,
+            r.obstacle_contacts,
+            fmt_or_na(r.min_obstacle_clearance_m, 2),
+            fmt_or_na(r.min_visible_fraction, 3),
+            fmt_or_na(r.min_visible_fraction_in_passage, 3),
+            fmt_or_na(r.min_fix_rate_hz, 2),
+            fmt_or_na(r.pose_error_p95_m, 2),
         ));
+    }
+    for r in rows.iter().filter(|r| !r.pass) {
+        t.push_str(&format!("\n{} failed:\n", r.variant));
+        for f in &r.failed {
+            t.push_str(&format!("- {f}\n"));
+        }
     }
     t
 }

@@ -24,6 +24,11 @@ pub(crate) fn pct(sorted: &[f64], q: f64) -> f64 {
     sorted[i.min(sorted.len() - 1)]
 }
 
+/// Root mean square; `None` for none.
+pub(crate) fn rms_of(v: &[f64]) -> Option<f64> {
+    (!v.is_empty()).then(|| rms(v))
+}
+
 /// Root mean square; 0 for none.
 pub(crate) fn rms(v: &[f64]) -> f64 {
     if v.is_empty() {
@@ -66,25 +71,139 @@ pub fn safety(scenario: &Scenario, tracks: &Tracks) -> Safety {
     let field = sonar::ObstacleField::new(&obstacles).ok();
     let mut min_clear = f64::INFINITY;
     let mut clearance = BTreeMap::new();
+    let mut contacts = Vec::new();
+    let contact_m = scenario.safety.collision_distance_m / 2.0;
     if let Some(field) = &field {
         for t in ts {
-            let m =
-                t.p.iter()
-                    .map(|p| field.distance(&Point3::from(*p)))
-                    .fold(f64::INFINITY, f64::min);
+            let d: Vec<(u64, f64)> = t
+                .t_ns
+                .iter()
+                .zip(&t.p)
+                .map(|(&ti, p)| (ti, field.distance(&Point3::from(*p))))
+                .collect();
+            let m = d.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
             if !obstacles.is_empty() {
                 clearance.insert(t.name.clone(), m);
             }
             min_clear = min_clear.min(m);
+            contacts.extend(stretches(&t.name, &d, |x| x < contact_m));
         }
     }
     Safety {
         min_pair_distance_m: finite(min_pair),
         min_pair: min_pair_names,
         safe_distance_m: scenario.safety.safe_distance_m,
+        collision_distance_m: scenario.safety.collision_distance_m,
         collisions: collided.len(),
+        obstacle_contacts: contacts,
+        clearance_below_d_min: min_clear < scenario.safety.safe_distance_m,
         min_obstacle_clearance_m: finite(min_clear),
         obstacle_clearance_m: clearance,
+    }
+}
+
+/// The stretches of a `(t ns, value)` series in which `hit` holds, with the
+/// smallest value in each.
+pub(crate) fn stretches(
+    vehicle: &str,
+    series: &[(u64, f64)],
+    hit: impl Fn(f64) -> bool,
+) -> Vec<Stretch> {
+    let mut out: Vec<Stretch> = Vec::new();
+    let mut open = false;
+    for &(t, v) in series {
+        let s = t as f64 * 1e-9;
+        match (hit(v), open) {
+            (true, false) => {
+                out.push(Stretch {
+                    vehicle: vehicle.to_string(),
+                    from_s: s,
+                    to_s: s,
+                    extreme_m: Some(v),
+                });
+                open = true;
+            }
+            (true, true) => {
+                if let Some(last) = out.last_mut() {
+                    last.to_s = s;
+                    last.extreme_m = Some(last.extreme_m.map_or(v, |m| m.min(v)));
+                }
+            }
+            (false, _) => open = false,
+        }
+    }
+    out
+}
+
+/// Stretches longer than `limit_s` without a fix of the parent, from a
+/// follower's first camera frame to its last: `(t ns, valid)` in time order.
+pub(crate) fn lost_stretches(vehicle: &str, frames: &[(u64, bool)], limit_s: f64) -> Vec<Stretch> {
+    let mut out = Vec::new();
+    let Some(&(first, _)) = frames.first() else {
+        return out;
+    };
+    let end = frames.last().map_or(first, |f| f.0);
+    let mut check = |from: u64, to: u64| {
+        if to.saturating_sub(from) as f64 * 1e-9 > limit_s {
+            out.push(Stretch {
+                vehicle: vehicle.to_string(),
+                from_s: from as f64 * 1e-9,
+                to_s: to as f64 * 1e-9,
+                extreme_m: None,
+            });
+        }
+    };
+    let mut since = first;
+    for &(t, valid) in frames {
+        if valid {
+            check(since, t);
+            since = t;
+        }
+    }
+    check(since, end);
+    out
+}
+
+/// What failed of the safety figures (see [`Verdict`]).
+pub fn verdict(s: &Summary) -> Verdict {
+    let f = &s.safety;
+    let mut failed = Vec::new();
+    if f.collisions > 0 {
+        failed.push(format!(
+            "{} pair(s) of vehicles closer than the collision distance {} m",
+            f.collisions, f.collision_distance_m
+        ));
+    }
+    for c in &f.obstacle_contacts {
+        failed.push(format!(
+            "{} in contact with an obstacle from {:.1} s to {:.1} s (centre {:.2} m from it)",
+            c.vehicle,
+            c.from_s,
+            c.to_s,
+            c.extreme_m.unwrap_or(f64::NAN)
+        ));
+    }
+    if let Some(m) = f.min_pair_distance_m.filter(|m| *m < f.safe_distance_m) {
+        failed.push(format!(
+            "min pair distance {m:.2} m ({}) below the safe distance {} m",
+            f.min_pair, f.safe_distance_m
+        ));
+    }
+    let half = f.safe_distance_m / 2.0;
+    if let Some(m) = f.min_obstacle_clearance_m.filter(|m| *m < half) {
+        failed.push(format!(
+            "obstacle clearance {m:.2} m below half the safe distance ({half} m)"
+        ));
+    }
+    for l in &s.perception.parent_lost {
+        failed.push(format!(
+            "{} without its parent from {:.1} s to {:.1} s (limit {PARENT_LOST_LIMIT_S} s)",
+            l.vehicle, l.from_s, l.to_s
+        ));
+    }
+    Verdict {
+        pass: failed.is_empty(),
+        failed,
     }
 }
 
@@ -118,11 +237,11 @@ pub fn formation(scenario: &Scenario, tracks: &Tracks, passage: &Passage) -> For
     }
     Formation {
         slot_error_rms_m: PhaseRms {
-            before: rms(&before),
-            during: rms(&during),
-            after: rms(&after),
+            before: rms_of(&before),
+            during: rms_of(&during),
+            after: rms_of(&after),
         },
-        slot_error_max_after_m: after.iter().copied().fold(0.0, f64::max),
+        slot_error_max_after_m: after.iter().copied().max_by(f64::total_cmp),
         slot_error_rms_m_by_follower: per_follower,
         slot_error_rms_m_by_level: by_level
             .iter()
@@ -153,7 +272,8 @@ pub fn perception(
         visibility_range_m: camera.visibility_range_m,
         parent_range_max_m: BTreeMap::new(),
         beyond_visibility: Vec::new(),
-        pose_error_m: Percentiles95 { p50: 0.0, p95: 0.0 },
+        parent_lost: Vec::new(),
+        pose_error_m: Percentiles95::default(),
     };
     let mut pose_err = Vec::new();
     for v in &scenario.vehicles {
@@ -163,6 +283,13 @@ pub fn perception(
         };
         let poses = rec.samples::<LeaderPose>(&ipc_types::topic(&v.name, Channel::LeaderPose));
         let valid = poses.iter().filter(|p| p.valid != 0).count();
+        let mut frames: Vec<(u64, bool)> = poses
+            .iter()
+            .map(|p| (p.header.sim_time_ns, p.valid != 0))
+            .collect();
+        frames.sort_by_key(|f| f.0);
+        out.parent_lost
+            .extend(lost_stretches(&v.name, &frames, PARENT_LOST_LIMIT_S));
         let frac = if poses.is_empty() {
             0.0
         } else {
@@ -204,8 +331,8 @@ pub fn perception(
     }
     pose_err.sort_by(f64::total_cmp);
     out.pose_error_m = Percentiles95 {
-        p50: pct(&pose_err, 0.5),
-        p95: pct(&pose_err, 0.95),
+        p50: (!pose_err.is_empty()).then(|| pct(&pose_err, 0.5)),
+        p95: (!pose_err.is_empty()).then(|| pct(&pose_err, 0.95)),
     };
     out
 }
@@ -418,6 +545,95 @@ yaw_deg = 0.0
     }
 
     #[test]
+    fn a_hull_in_the_wall_is_a_contact_with_its_times_and_fails_the_run() {
+        let sc = scenario();
+        let mut ts = on_slots();
+        // The leader runs into the wall's face at 20 m: north at 2.5 m/s
+        // for 10 s ends 5 m inside it. Contact: centre within half the
+        // collision distance (0.5 m) of the face, from t = 7.8 s on.
+        ts[0] = track(
+            "L",
+            &(0..=100)
+                .map(|k| {
+                    let t = k as f64 * 0.1;
+                    (t, [2.5 * t, 0.0, 10.0])
+                })
+                .collect::<Vec<_>>(),
+        );
+        let safety = safety(&sc, &Tracks::new(ts));
+        assert_eq!(safety.collisions, 0, "no pair collided");
+        assert_eq!(safety.obstacle_contacts.len(), 1);
+        let c = &safety.obstacle_contacts[0];
+        assert_eq!(c.vehicle, "L");
+        approx::assert_relative_eq!(c.from_s, 7.9, epsilon = 1e-9);
+        approx::assert_relative_eq!(c.to_s, 10.0, epsilon = 1e-9);
+        assert_eq!(c.extreme_m, Some(0.0), "inside the wall");
+        assert!(safety.clearance_below_d_min);
+        let s = Summary {
+            safety,
+            ..Summary::default()
+        };
+        let v = verdict(&s);
+        assert!(!v.pass);
+        assert!(
+            v.failed
+                .iter()
+                .any(|f| f.starts_with("L in contact with an obstacle from 7.9 s")),
+            "{v:?}"
+        );
+        assert!(
+            v.failed
+                .iter()
+                .any(|f| f.contains("half the safe distance")),
+            "{v:?}"
+        );
+    }
+
+    #[test]
+    fn a_parent_lost_longer_than_the_limit_is_reported_with_its_times() {
+        let s = |t: f64| (t * 1e9).round() as u64;
+        // Fixes at 10 Hz, none from 2.0 s (exclusive) to 8.5 s: 6.5 s lost.
+        let frames: Vec<(u64, bool)> = (0..=100)
+            .map(|k| {
+                let t = k as f64 * 0.1;
+                (s(t), !(t > 2.05 && t < 8.45))
+            })
+            .collect();
+        let lost = lost_stretches("F1", &frames, PARENT_LOST_LIMIT_S);
+        assert_eq!(lost.len(), 1);
+        approx::assert_relative_eq!(lost[0].from_s, 2.0, epsilon = 1e-9);
+        approx::assert_relative_eq!(lost[0].to_s, 8.5, epsilon = 1e-9);
+        // 4.9 s without a fix is within the limit; a follower that never
+        // saw its parent over 6 s is lost from its first frame to its last.
+        let short: Vec<(u64, bool)> = (0..=100)
+            .map(|k| (s(k as f64 * 0.1), !(11..60).contains(&k)))
+            .collect();
+        assert!(lost_stretches("F1", &short, PARENT_LOST_LIMIT_S).is_empty());
+        let never: Vec<(u64, bool)> = (0..=60).map(|k| (s(k as f64 * 0.1), false)).collect();
+        let lost = lost_stretches("F2", &never, PARENT_LOST_LIMIT_S);
+        assert_eq!(lost.len(), 1);
+        approx::assert_relative_eq!(lost[0].to_s - lost[0].from_s, 6.0, epsilon = 1e-9);
+        let mut sum = Summary::default();
+        sum.perception.parent_lost = lost;
+        let v = verdict(&sum);
+        assert!(
+            !v.pass && v.failed[0].starts_with("F2 without its parent"),
+            "{v:?}"
+        );
+    }
+
+    #[test]
+    fn a_safe_run_passes() {
+        let s = Summary {
+            safety: safety(&scenario(), &Tracks::new(on_slots())),
+            ..Summary::default()
+        };
+        assert!(s.safety.obstacle_contacts.is_empty());
+        let v = verdict(&s);
+        assert!(v.pass && v.failed.is_empty(), "{v:?}");
+    }
+
+    #[test]
     fn clearance_is_the_distance_to_the_nearest_face() {
         let s = safety(&scenario(), &Tracks::new(on_slots()));
         // The leader ends at 10 m north, the wall's face is at 20 m.
@@ -466,11 +682,13 @@ yaw_deg = 0.0
         approx::assert_relative_eq!(f.slot_error_rms_m_by_level["2"], 5.0, epsilon = 1e-9);
         // Without a passage everything is "before".
         approx::assert_relative_eq!(
-            f.slot_error_rms_m.before,
+            f.slot_error_rms_m.before.unwrap_or(f64::NAN),
             (25.0f64 / 2.0).sqrt(),
             epsilon = 1e-9
         );
-        assert_eq!(f.slot_error_rms_m.during, 0.0);
+        assert_eq!(f.slot_error_rms_m.during, None, "no passage: no 'during'");
+        assert_eq!(f.slot_error_rms_m.after, None);
+        assert_eq!(f.slot_error_max_after_m, None);
         assert_eq!(f.passage_s, None);
     }
 
@@ -495,11 +713,22 @@ yaw_deg = 0.0
             .collect()]);
         let f = formation(&sc, &Tracks::new(ts), &passage);
         assert_eq!(f.passage_s, Some([5.0, 6.0]));
-        assert_eq!(f.slot_error_rms_m.after, 0.0);
+        assert_eq!(
+            f.slot_error_rms_m.after, None,
+            "the run ends inside the settling"
+        );
         // F1 is 1 m off its slot during the passage, and so is F2: its slot
         // hangs on F1, which is where F2 is not.
-        approx::assert_relative_eq!(f.slot_error_rms_m.during, 1.0, epsilon = 1e-9);
-        approx::assert_relative_eq!(f.slot_error_rms_m.before, 0.0, epsilon = 1e-9);
+        approx::assert_relative_eq!(
+            f.slot_error_rms_m.during.unwrap_or(f64::NAN),
+            1.0,
+            epsilon = 1e-9
+        );
+        approx::assert_relative_eq!(
+            f.slot_error_rms_m.before.unwrap_or(f64::NAN),
+            0.0,
+            epsilon = 1e-9
+        );
     }
 
     #[test]

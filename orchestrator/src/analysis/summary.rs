@@ -13,13 +13,15 @@ use shoal_runtime::latency::LatencySummary;
 use shoal_scenario::Scenario;
 
 use super::formation::Passage;
-use super::metrics::{end_to_end, formation, mission, mpc, perception, runtime_stats, safety};
+use super::metrics::{
+    end_to_end, formation, mission, mpc, perception, runtime_stats, safety, verdict,
+};
 use super::track::Tracks;
 use crate::launch::RunOutcome;
 
 /// Version of `summary.json`'s layout; raised when a field changes meaning
 /// or goes away (not when one is added).
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
 
 /// What `summary.json` holds.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -76,6 +78,36 @@ pub struct Summary {
     pub mpc: MpcFigures,
     /// The recording.
     pub recording: RecordingFigures,
+    /// Whether every safety figure passed, and which did not.
+    pub verdict: Verdict,
+}
+
+/// Pass or fail, from the safety figures: no collision of either kind, no
+/// pair closer than the safe distance, no vehicle's centre closer to an
+/// obstacle than half the safe distance, no follower without its parent
+/// for longer than [`PARENT_LOST_LIMIT_S`].
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Verdict {
+    /// Every safety figure passed.
+    pub pass: bool,
+    /// What failed, one line each (empty on a pass).
+    pub failed: Vec<String>,
+}
+
+/// Longest a follower may go without a fix of its parent, s.
+pub const PARENT_LOST_LIMIT_S: f64 = 5.0;
+
+/// A stretch of time in which something held for one vehicle.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Stretch {
+    /// The vehicle.
+    pub vehicle: String,
+    /// Start, s.
+    pub from_s: f64,
+    /// End, s.
+    pub to_s: f64,
+    /// The extreme value over it (closest approach for a contact), m.
+    pub extreme_m: Option<f64>,
 }
 
 /// Distances between vehicles and to obstacles, from truth.
@@ -85,10 +117,18 @@ pub struct Safety {
     pub min_pair_distance_m: Option<f64>,
     /// The pair it was, `A-B`.
     pub min_pair: String,
-    /// The scenario's safe distance, m.
+    /// The scenario's safe distance, m (also the planners' D_min).
     pub safe_distance_m: f64,
+    /// The scenario's collision distance between two vehicles' centres, m.
+    pub collision_distance_m: f64,
     /// Pairs that came closer than the collision distance.
     pub collisions: usize,
+    /// Vehicles whose hull touched an obstacle (centre closer to it than
+    /// half the collision distance), with when and how close.
+    pub obstacle_contacts: Vec<Stretch>,
+    /// The smallest obstacle clearance is below the planners' D_min (the
+    /// safe distance): a warning; the verdict needs half of it.
+    pub clearance_below_d_min: bool,
     /// Smallest centre-to-obstacle distance of any vehicle, m.
     pub min_obstacle_clearance_m: Option<f64>,
     /// Each vehicle's smallest distance to an obstacle, m (empty without
@@ -102,7 +142,7 @@ pub struct Formation {
     /// RMS over every follower, before, during and after the passage, m.
     pub slot_error_rms_m: PhaseRms,
     /// Largest after the passage, m.
-    pub slot_error_max_after_m: f64,
+    pub slot_error_max_after_m: Option<f64>,
     /// RMS per follower over the run, m.
     pub slot_error_rms_m_by_follower: BTreeMap<String, Rms>,
     /// RMS per level of the formation tree (1 = the leader's followers), m.
@@ -111,15 +151,16 @@ pub struct Formation {
     pub passage_s: Option<[f64; 2]>,
 }
 
-/// An RMS before, during and after the passage.
+/// An RMS before, during and after the passage; `null` for a part of the
+/// run that did not happen.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct PhaseRms {
     /// Before the first follower avoided (the whole run without a passage).
-    pub before: f64,
+    pub before: Option<f64>,
     /// From then until 20 s after the last avoided.
-    pub during: f64,
+    pub during: Option<f64>,
     /// After that.
-    pub after: f64,
+    pub after: Option<f64>,
 }
 
 /// One RMS.
@@ -140,6 +181,9 @@ pub struct Perception {
     pub parent_fix_rate_hz: BTreeMap<String, f64>,
     /// The camera's visibility range, m.
     pub visibility_range_m: f64,
+    /// Followers without a fix of their parent for longer than
+    /// [`PARENT_LOST_LIMIT_S`], with when.
+    pub parent_lost: Vec<Stretch>,
     /// Farthest each follower's camera got from its parent, m.
     pub parent_range_max_m: BTreeMap<String, f64>,
     /// Followers whose camera got beyond the visibility range.
@@ -148,13 +192,13 @@ pub struct Perception {
     pub pose_error_m: Percentiles95,
 }
 
-/// Median and 95th percentile.
+/// Median and 95th percentile (`null` without samples).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Percentiles95 {
     /// Median.
-    pub p50: f64,
+    pub p50: Option<f64>,
     /// 95th percentile.
-    pub p95: f64,
+    pub p95: Option<f64>,
 }
 
 /// The leader's mission.
@@ -275,6 +319,13 @@ impl Summary {
     }
 }
 
+/// A figure as a table shows it: `digits` decimals, or `n/a` where it does
+/// not exist.
+pub fn fmt_or_na(x: Option<f64>, digits: usize) -> String {
+    x.filter(|v| v.is_finite())
+        .map_or_else(|| "n/a".to_string(), |v| format!("{v:.digits$}"))
+}
+
 /// The smallest value of a per-vehicle map.
 pub fn min_value(m: &BTreeMap<String, f64>) -> Option<f64> {
     m.values().copied().min_by(f64::total_cmp)
@@ -296,7 +347,7 @@ pub fn summarize(
             .and_then(|v| v.parse().ok())
             .unwrap_or(0)
     };
-    Summary {
+    let mut s = Summary {
         schema_version: SCHEMA_VERSION,
         scenario: scenario.name.clone(),
         mode: mode.to_string(),
@@ -336,5 +387,8 @@ pub fn summarize(
             rejected: get("rejected"),
             truncated: rec.truncated(),
         },
-    }
+        verdict: Verdict::default(),
+    };
+    s.verdict = verdict(&s);
+    s
 }

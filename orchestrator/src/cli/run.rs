@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use shoal_runtime::Mode;
 
-use crate::analysis::summary::Summary;
+use crate::analysis::summary::{fmt_or_na, Summary, PARENT_LOST_LIMIT_S};
 use crate::launch::{self, RunSettings};
 use crate::{pipeline, preflight};
 
@@ -80,34 +80,59 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
 }
 
 fn print_table(s: &Summary) {
-    let safe = s.safety.safe_distance_m;
-    let min_pair = s.safety.min_pair_distance_m.unwrap_or(f64::NAN);
-    let collisions = s.safety.collisions;
+    let f = &s.safety;
     let mark = |ok: bool| if ok { "pass" } else { "FAIL" };
+    let na = fmt_or_na;
     eprintln!(
         "  run              {} ({}), {:.1} s simulated in {:.1} s ({:.1}x real time)",
         s.scenario, s.mode, s.sim_time_s, s.wall_time_s, s.real_time_factor
     );
     eprintln!(
-        "  collisions       {collisions}  [{}]",
-        mark(collisions == 0)
+        "  collisions       {} between vehicles, {} with obstacles  [{}]",
+        f.collisions,
+        f.obstacle_contacts.len(),
+        mark(f.collisions == 0 && f.obstacle_contacts.is_empty())
     );
     eprintln!(
-        "  min pair dist    {min_pair:.2} m ({}) vs safe {safe:.2} m  [{}]",
-        s.safety.min_pair,
-        mark(min_pair >= safe)
+        "  min pair dist    {} m ({}) vs safe {:.2} m  [{}]",
+        na(f.min_pair_distance_m, 2),
+        f.min_pair,
+        f.safe_distance_m,
+        mark(f.min_pair_distance_m.is_none_or(|m| m >= f.safe_distance_m))
+    );
+    let half = f.safe_distance_m / 2.0;
+    eprintln!(
+        "  min clearance    {} m to obstacles vs {half:.2} m (half the safe distance){}  [{}]",
+        na(f.min_obstacle_clearance_m, 2),
+        if f.clearance_below_d_min {
+            "; below the planners' D_min"
+        } else {
+            ""
+        },
+        mark(f.min_obstacle_clearance_m.is_none_or(|m| m >= half))
     );
     eprintln!(
-        "  min clearance    {:.2} m to obstacles",
-        s.safety.min_obstacle_clearance_m.unwrap_or(f64::NAN)
+        "  parent lost      {} follower(s) over {PARENT_LOST_LIMIT_S} s  [{}]",
+        s.perception.parent_lost.len(),
+        mark(s.perception.parent_lost.is_empty())
     );
     let rms = &s.formation.slot_error_rms_m;
     eprintln!(
-        "  slot error rms   before {:.2} m, during {:.2} m, after {:.2} m",
-        rms.before, rms.during, rms.after
+        "  slot error rms   before {} m, during {} m, after {} m",
+        na(rms.before, 2),
+        na(rms.during, 2),
+        na(rms.after, 2)
     );
     eprintln!(
         "  recording        {} messages, {} dropped",
         s.recording.messages, s.recording.dropped
     );
+    if s.verdict.pass {
+        eprintln!("  verdict          pass");
+    } else {
+        eprintln!("  verdict          FAIL:");
+        for line in &s.verdict.failed {
+            eprintln!("                   - {line}");
+        }
+    }
 }
