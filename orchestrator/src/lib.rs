@@ -15,11 +15,13 @@
 //! | [`export`] | the recording for other viewers (Foxglove) |
 //! | [`replay`] | a recording played back, or one process re-run on it |
 //! | [`bench`] | the benchmarks that print figures (`shoal bench`) |
-//! | [`gen`] | generated large-group scenarios (`shoal gen`) |
+//! | [`gen`] | generated large-group scenarios and obstacle courses (`shoal gen`) |
+//! | [`campaign`] | many generated courses × seeds, judged together (`shoal campaign`) |
 //! | [`pipeline`] | one scenario from resolution to summary and plots (run, compare, benches) |
 
 pub mod analysis;
 pub mod bench;
+pub mod campaign;
 pub mod cli;
 pub mod export;
 pub mod gen;

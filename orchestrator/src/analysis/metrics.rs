@@ -213,6 +213,7 @@ pub fn formation(scenario: &Scenario, tracks: &Tracks, passage: &Passage) -> For
     let mut per_follower = BTreeMap::new();
     let levels = scenario.levels();
     let mut by_level: BTreeMap<usize, Vec<f64>> = BTreeMap::new();
+    let mut all: Vec<(u64, f64)> = Vec::new();
     for v in &scenario.vehicles {
         let (Some(parent), Some(slot)) = (&v.parent, v.slot_m) else {
             continue;
@@ -221,6 +222,7 @@ pub fn formation(scenario: &Scenario, tracks: &Tracks, passage: &Passage) -> For
             continue;
         };
         let errs = slot_errors(tf, tp, slot);
+        all.extend(errs.iter().copied());
         for &(t, e) in &errs {
             match passage.phase(t) {
                 Phase::Before => before.push(e),
@@ -235,7 +237,15 @@ pub fn formation(scenario: &Scenario, tracks: &Tracks, passage: &Passage) -> For
             .or_default()
             .extend(errs);
     }
+    let t_end = all.iter().map(|(t, _)| *t).max().unwrap_or(0);
+    let from = t_end.saturating_sub((FINAL_WINDOW_S * 1e9) as u64);
+    let last: Vec<f64> = all
+        .iter()
+        .filter(|(t, _)| *t >= from)
+        .map(|(_, e)| *e)
+        .collect();
     Formation {
+        slot_error_rms_final_m: rms_of(&last),
         slot_error_rms_m: PhaseRms {
             before: rms_of(&before),
             during: rms_of(&during),
@@ -273,6 +283,7 @@ pub fn perception(
         parent_range_max_m: BTreeMap::new(),
         beyond_visibility: Vec::new(),
         parent_lost: Vec::new(),
+        longest_parent_gap_s: BTreeMap::new(),
         pose_error_m: Percentiles95::default(),
     };
     let mut pose_err = Vec::new();
@@ -290,6 +301,11 @@ pub fn perception(
         frames.sort_by_key(|f| f.0);
         out.parent_lost
             .extend(lost_stretches(&v.name, &frames, PARENT_LOST_LIMIT_S));
+        let longest = lost_stretches(&v.name, &frames, 0.0)
+            .iter()
+            .map(|s| s.to_s - s.from_s)
+            .fold(0.0, f64::max);
+        out.longest_parent_gap_s.insert(v.name.clone(), longest);
         let frac = if poses.is_empty() {
             0.0
         } else {

@@ -21,7 +21,10 @@ use crate::launch::RunOutcome;
 
 /// Version of `summary.json`'s layout; raised when a field changes meaning
 /// or goes away (not when one is added).
-pub const SCHEMA_VERSION: u32 = 2;
+pub const SCHEMA_VERSION: u32 = 3;
+/// The window at the end of a run that `formation.slot_error_rms_final_m`
+/// covers, s.
+pub const FINAL_WINDOW_S: f64 = 30.0;
 
 /// What `summary.json` holds.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -143,6 +146,11 @@ pub struct Formation {
     pub slot_error_rms_m: PhaseRms,
     /// Largest after the passage, m.
     pub slot_error_max_after_m: Option<f64>,
+    /// RMS over every follower in the last [`FINAL_WINDOW_S`] of the run, m:
+    /// generated courses end well past their last obstacle and the run
+    /// well after the leader stops, so this is the formation re-formed
+    /// after the course (and any creep after the stop).
+    pub slot_error_rms_final_m: Option<f64>,
     /// RMS per follower over the run, m.
     pub slot_error_rms_m_by_follower: BTreeMap<String, Rms>,
     /// RMS per level of the formation tree (1 = the leader's followers), m.
@@ -184,6 +192,9 @@ pub struct Perception {
     /// Followers without a fix of their parent for longer than
     /// [`PARENT_LOST_LIMIT_S`], with when.
     pub parent_lost: Vec<Stretch>,
+    /// Longest time between two valid fixes of its parent, per follower
+    /// (from its first camera frame to its last), s.
+    pub longest_parent_gap_s: BTreeMap<String, f64>,
     /// Farthest each follower's camera got from its parent, m.
     pub parent_range_max_m: BTreeMap<String, f64>,
     /// Followers whose camera got beyond the visibility range.

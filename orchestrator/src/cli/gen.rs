@@ -1,6 +1,6 @@
 //! `shoal gen`: a generated large-group scenario on stdout.
 
-use crate::gen::{generate, GenOptions, ObstacleCount, Shape};
+use crate::gen::{generate, Family, GenOptions, ObstacleCount, Shape};
 
 /// Arguments of `shoal gen`.
 #[derive(Debug, clap::Args)]
@@ -13,11 +13,13 @@ use crate::gen::{generate, GenOptions, ObstacleCount, Shape};
                   gen25.toml && shoal run gen25.toml"
 )]
 pub struct GenCmd {
-    /// Number of vehicles, leader included (2 to 256).
-    #[arg(long, default_value_t = 25)]
-    pub vehicles: usize,
+    /// Number of vehicles, leader included (2 to 256; default 25, or 5 with
+    /// `--shape paper`).
+    #[arg(long)]
+    pub vehicles: Option<usize>,
     /// Formation shape: triangle (filled wedge, shallowest tree), v (two
-    /// arms), column (three files), grid (wedge front, then 2k+1 files).
+    /// arms; `--vehicles 9` is two branches four deep), column (three
+    /// files), grid (wedge front, then 2k+1 files), paper (the paper's five).
     #[arg(long, value_enum, default_value_t = Shape::Triangle)]
     pub shape: Shape,
     /// Distance between neighbouring files, m. A file's head is 2 × that
@@ -32,8 +34,16 @@ pub struct GenCmd {
     pub seed: u64,
     /// Obstacles: `auto` (one gate of two walls) or a count K (K/2 gates along
     /// the route, plus one port-side wall if K is odd; 0 = open water).
-    #[arg(long, default_value = "auto")]
+    #[arg(long, default_value = "auto", conflicts_with = "course")]
     pub obstacles: ObstacleCount,
+    /// An obstacle course of this family instead of gates: gate, offset,
+    /// asymmetric, slalom, turn, s-bend, cylinders, angled, depth, current
+    /// (the route, its obstacles and any current drawn from the course seed).
+    #[arg(long, value_enum)]
+    pub course: Option<Family>,
+    /// The course's seed (default: `--seed`): one course, several noise seeds.
+    #[arg(long, requires = "course")]
+    pub course_seed: Option<u64>,
     /// Scenario name (default `gen-<shape>-<N>-s<seed>`).
     #[arg(long)]
     pub name: Option<String>,
@@ -42,12 +52,16 @@ pub struct GenCmd {
 impl From<&GenCmd> for GenOptions {
     fn from(c: &GenCmd) -> Self {
         Self {
-            vehicles: c.vehicles,
+            vehicles: c
+                .vehicles
+                .unwrap_or(if c.shape == Shape::Paper { 5 } else { 25 }),
             shape: c.shape,
             spacing_m: c.spacing,
             seed: c.seed,
             obstacles: c.obstacles,
             name: c.name.clone(),
+            course: c.course,
+            course_seed: c.course_seed,
         }
     }
 }

@@ -4,6 +4,7 @@
 //! command whose only product is what it prints, so it keeps its arguments
 //! and its tables, and this file only names them.
 
+mod campaign;
 mod check;
 mod compare;
 mod export;
@@ -56,8 +57,11 @@ enum Cmd {
         #[arg(long)]
         digest: bool,
     },
-    /// Generate a large-group scenario on stdout.
+    /// Generate a large-group scenario or an obstacle course on stdout.
     Gen(gen::GenCmd),
+    /// Run N generated courses x K seeds and report the pass rate per
+    /// family, the worst figures and the failing runs.
+    Campaign(campaign::CampaignCmd),
     /// Convert a recording for other viewers (Foxglove).
     Export(export::ExportCmd),
     /// Write a complete, indexed copy of a truncated recording.
@@ -99,6 +103,7 @@ pub fn main() -> ExitCode {
         } => inspect::run(recording, json, digest),
         Cmd::Compare(cmd) => compare::run(cmd),
         Cmd::Gen(cmd) => gen::run(cmd),
+        Cmd::Campaign(cmd) => campaign::run(cmd),
         Cmd::Export(cmd) => export::run(cmd),
         Cmd::Recover(cmd) => recover::run(cmd),
         Cmd::Replay(cmd) => replay::run(cmd),

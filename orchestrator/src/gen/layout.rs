@@ -168,7 +168,7 @@ fn has_cell(shape: Shape, n: usize, c: i64, j: i64) -> bool {
             Shape::Triangle => true,
             Shape::Grid => a <= grid_half_width(n),
             Shape::Column => a <= 1,
-            Shape::V => j < v_thickness(n),
+            Shape::V | Shape::Paper => j < v_thickness(n),
         }
 }
 

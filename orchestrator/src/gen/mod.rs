@@ -42,6 +42,7 @@
 //! The seed sets the scenario's `seed` (sensor noise) and jitters where the
 //! gates stand and how long their walls are.
 
+pub mod course;
 mod layout;
 mod render;
 #[cfg(test)]
@@ -50,6 +51,7 @@ mod tests;
 use camera_pose::CameraConfig;
 use planner::formation::{FollowerSlot, FormationParams};
 
+pub use course::{Course, Family};
 pub use layout::{Lattice, Member};
 use render::render;
 
@@ -92,6 +94,8 @@ pub const YAW_HEADWAY_S: f64 = 3.0;
 pub const HEADWAY_AVG_S: f64 = 60.0;
 /// How far the walls reach past the outermost file, m.
 pub const WALL_OVERHANG_M: f64 = 6.0;
+/// The lateral links of the paper's formation (`--shape paper`), m.
+pub const PAPER_LINK_M: f64 = 8.0;
 /// Mission speed, m/s (the paper's).
 pub const SPEED_MPS: f64 = 1.0;
 /// Leader's speed ramp, m/s² (as the paper scenario).
@@ -111,6 +115,9 @@ pub enum Shape {
     Column,
     /// A wedge front, then `2k + 1` files with `k = round(√N / 2.5)`.
     Grid,
+    /// The paper's five: L, F1/F2 8 m behind and 4 m either side of it,
+    /// F3/F4 likewise behind F1/F2 (a V of heads with 8 m links).
+    Paper,
 }
 
 impl Shape {
@@ -121,6 +128,7 @@ impl Shape {
             Shape::V => "v",
             Shape::Column => "column",
             Shape::Grid => "grid",
+            Shape::Paper => "paper",
         }
     }
 }
@@ -168,8 +176,14 @@ pub struct GenOptions {
     pub seed: u64,
     /// Obstacles.
     pub obstacles: ObstacleCount,
-    /// Scenario name (`None`: `gen-<shape>-<N>-s<seed>`).
+    /// Scenario name (`None`: `gen-<shape>-<N>-s<seed>`, or
+    /// `<course>-<shape>-<N>-s<seed>`).
     pub name: Option<String>,
+    /// A course of this family instead of `obstacles`' gates.
+    pub course: Option<Family>,
+    /// The course's own seed (where and how its obstacles stand; `None`:
+    /// `seed`), so one course can be run with several noise seeds.
+    pub course_seed: Option<u64>,
 }
 
 impl Default for GenOptions {
@@ -181,6 +195,8 @@ impl Default for GenOptions {
             seed: 0,
             obstacles: ObstacleCount::Auto,
             name: None,
+            course: None,
+            course_seed: None,
         }
     }
 }
@@ -221,6 +237,9 @@ pub enum GenError {
     /// No D_a/D_b keeps the formation safe.
     #[error("no displacement trajectories keep this formation safe: {0}")]
     Formation(String),
+    /// The paper's formation has five vehicles.
+    #[error("--shape paper: the paper's formation has 5 vehicles, not {0}")]
+    PaperSize(usize),
     /// A bug in the generator.
     #[error("internal: {0}")]
     Internal(String),
@@ -274,6 +293,10 @@ pub struct Plan {
     pub memory_behind_m: f64,
     /// `follower.memory_max_age_s`.
     pub memory_max_age_s: f64,
+    /// The course, when one was asked for (then `gates` is empty).
+    pub course: Option<Course>,
+    /// Half the gap of a gate (of the gates, or of the course's gaps), m.
+    pub half_gap_m: f64,
 }
 
 /// SplitMix64: a small deterministic generator for the seed's jitter.
@@ -352,6 +375,9 @@ pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
     if n < 2 {
         return Err(GenError::TooFewVehicles(n));
     }
+    if opts.shape == Shape::Paper && n != 5 {
+        return Err(GenError::PaperSize(n));
+    }
     let walls = match opts.obstacles {
         ObstacleCount::Auto => 2,
         ObstacleCount::Count(k) if k > MAX_OBSTACLES => {
@@ -365,12 +391,24 @@ pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
     let name = match &opts.name {
         Some(s) if valid_name(s) => s.clone(),
         Some(s) => return Err(GenError::Name(s.clone())),
-        None => format!("gen-{}-{n}-s{}", opts.shape.name(), opts.seed),
+        None => match (opts.course, opts.course_seed) {
+            (Some(f), Some(c)) => format!("{f}{c}-{}-{n}-s{}", opts.shape.name(), opts.seed),
+            (Some(f), None) => format!("{f}-{}-{n}-s{}", opts.shape.name(), opts.seed),
+            (None, _) => format!("gen-{}-{n}-s{}", opts.shape.name(), opts.seed),
+        },
     };
     // The tightest lattice the camera allows first; if no D_a/D_b keeps that
     // one safe (close files leave the displacements little room), longer
     // links, up to what the visibility range allows.
-    let tightest = layout::lattice(opts.spacing_m)?;
+    let tightest = if opts.shape == Shape::Paper {
+        Lattice {
+            diag_m: PAPER_LINK_M,
+            row_m: PAPER_LINK_M * 2.0 / 3.0,
+            col_m: opts.spacing_m,
+        }
+    } else {
+        layout::lattice(opts.spacing_m)?
+    };
     let mut failure = String::new();
     let mut found = None;
     let mut diag_m = tightest.diag_m;
@@ -380,7 +418,11 @@ pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
             row_m: diag_m * 2.0 / 3.0,
             col_m: tightest.col_m,
         };
-        let members = layout::members(opts.shape, n, lattice)?;
+        let shape = match opts.shape {
+            Shape::Paper => Shape::V,
+            s => s,
+        };
+        let members = layout::members(shape, n, lattice)?;
         match assign(&members, n <= MARGIN_MAX_VEHICLES) {
             Ok((d, sep)) => {
                 found = Some((lattice, members, d, sep));
@@ -413,8 +455,14 @@ pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
     let mut rng = SplitMix(opts.seed ^ 0x5348_4F41_4C47_454E);
     let group_len = members.iter().map(|m| -m.pos_m[0]).fold(0.0, f64::max);
     let c_max = members.iter().map(|m| m.col.abs()).max().unwrap_or(0);
-    // The outermost file shifts; the others pass as they are.
-    let c_in = (c_max - 1).max(0);
+    // The outermost file shifts; the others pass as they are. The paper's
+    // passage is narrower: its walls stand on F1/F2's track (8 m wide), so
+    // every follower shifts.
+    let c_in = if opts.shape == Shape::Paper {
+        0
+    } else {
+        (c_max - 1).max(0)
+    };
     let margin = GATE_CLEAR_MARGIN_M.min(lattice.col_m - SAFE_DISTANCE_M);
     let half_gap_m = c_in as f64 * lattice.col_m + SAFE_DISTANCE_M + margin;
     let outer = c_max as f64 * lattice.col_m;
@@ -449,11 +497,33 @@ pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
         at += length_m + between + 10.0 * rng.unit();
     }
     let last_end = gates.last().map_or(40.0, |g: &Gate| g.start_m + g.length_m);
-    let goal_m = mm(last_end + group_len + memory_behind_m + 40.0).ceil();
+    let mut goal_m = mm(last_end + group_len + memory_behind_m + 40.0).ceil();
+    let course = opts.course.map(|family| {
+        let outer = members.iter().map(|m| m.pos_m[1].abs()).fold(0.0, f64::max);
+        let geom = course::Geom {
+            half_gap_m,
+            outer_m: outer,
+            group_len_m: group_len,
+            settle_m: group_len + memory_behind_m + 40.0,
+            depth_m,
+            min_depth_m: (6.0 + shift_up_m).ceil(),
+            z_offset_m: (shift_down_m - shift_up_m) / 2.0,
+            half_height_m: (shift_up_m + shift_down_m) / 2.0 + 10.0,
+        };
+        course::build(family, geom, opts.course_seed.unwrap_or(opts.seed))
+    });
+    if let Some(c) = &course {
+        gates.clear();
+        goal_m = c.length_m.ceil();
+        max_len = max_len.max(32.0);
+    }
     // Leader: goal at SPEED after a ramp of SPEED/ACCEL (costs half of it),
-    // a taper into the goal (about the same), then 40 s of settled formation.
+    // a taper into the goal (about the same), then 40 s of settled formation
+    // (and 10 s for each turn).
     let ramp_s = SPEED_MPS / ACCEL_MPS2;
-    let duration_s = ((goal_m / SPEED_MPS + ramp_s + 40.0) / 10.0).ceil() * 10.0;
+    let turns = course.as_ref().map_or(0, |c| c.turns_deg.len());
+    let duration_s =
+        ((goal_m / SPEED_MPS + ramp_s + 40.0 + 10.0 * turns as f64) / 10.0).ceil() * 10.0;
     let memory_max_age_s =
         (((memory_behind_m + max_len + 20.0) / SPEED_MPS * 1.5).max(60.0)).ceil();
 
@@ -472,6 +542,8 @@ pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
         duration_s,
         memory_behind_m,
         memory_max_age_s,
+        course,
+        half_gap_m,
     })
 }
 

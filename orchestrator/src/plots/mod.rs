@@ -23,11 +23,13 @@ use plotters::style::full_palette::{GREY_300, GREY_500, GREY_700, ORANGE_100};
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use recordings::Recording;
 
+mod campaign;
 mod compare;
 mod figures;
 mod geometry;
 mod style;
 
+pub use campaign::write_campaign_plot;
 pub use compare::write_compare_plot;
 #[cfg(test)]
 use compare::COMPARE_TITLE;

@@ -1,0 +1,391 @@
+//! `shoal campaign`: N generated courses × K seeds, in lockstep, as many
+//! runs at once as the cores allow; a table, a plot and JSON of how the
+//! method fared. The campaign, not one scenario, is how a change to the
+//! method is judged.
+//!
+//! Course `i` is of family `families[i mod F]` with course seed `i div F`
+//! (so every family gets its share and the first `F` courses cover them
+//! all); each runs with noise seeds `0..K`. Every run is a child `shoal run`
+//! (a crash or a hang stays in its run), its scenario in
+//! `OUT/courses/NAME.toml`, its output in `OUT/runs/NAME/`. A run passes
+//! when [`judge`] finds nothing: the summary's safety verdict, the slot
+//! error settled after the course and the leader at its goal.
+//!
+//! Running the same command again resumes: a run whose directory holds a
+//! `summary.json` is not run again. Ctrl-C stops the runs under way (their
+//! rows say `interrupted`) and writes the report of those finished.
+
+mod report;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::mpsc;
+
+use anyhow::Context;
+use serde::{Deserialize, Serialize};
+
+use crate::analysis::summary::{Summary, FINAL_WINDOW_S};
+use crate::gen::{self, Family, GenOptions, Shape};
+
+pub use report::{write_report, Report};
+
+/// Largest slot error RMS over the settled end of a run for a pass, m.
+pub const FINAL_RMS_LIMIT_M: f64 = 0.5;
+/// Farthest the leader may end from its goal for a pass, m.
+pub const GOAL_LIMIT_M: f64 = 1.0;
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct CampaignOptions {
+    /// Formation shape.
+    pub shape: Shape,
+    /// Vehicles.
+    pub vehicles: usize,
+    /// File spacing, m.
+    pub spacing_m: f64,
+    /// Families, in order.
+    pub families: Vec<Family>,
+    /// Courses.
+    pub courses: usize,
+    /// Noise seeds per course.
+    pub seeds: u64,
+    /// Runs at once.
+    pub jobs: usize,
+    /// Output directory.
+    pub out: PathBuf,
+    /// The `shoal` binary to run each scenario with.
+    pub shoal: PathBuf,
+    /// `--bin-dir` for the runs.
+    pub bin_dir: Option<PathBuf>,
+    /// Keep every recording (default: only the failing runs').
+    pub keep_recordings: bool,
+    /// No progress bar.
+    pub quiet: bool,
+}
+
+/// One run of the campaign.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Job {
+    /// `<family><course seed>-<shape>-<N>-s<seed>`.
+    pub name: String,
+    /// Family.
+    pub family: Family,
+    /// Course seed.
+    pub course_seed: u64,
+    /// Noise seed.
+    pub seed: u64,
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    /// Every criterion met.
+    Pass,
+    /// A criterion failed.
+    Fail,
+    /// The run itself failed (no summary).
+    Error,
+    /// Stopped by Ctrl-C.
+    Interrupted,
+}
+
+/// One row of the campaign: a run and its figures.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunRow {
+    /// Run name.
+    pub name: String,
+    /// Family.
+    pub family: String,
+    /// Course seed.
+    pub course_seed: u64,
+    /// Noise seed.
+    pub seed: u64,
+    /// Where its output is.
+    pub dir: String,
+    /// How it ended.
+    pub status: Status,
+    /// What failed (empty for a pass).
+    pub failed: Vec<String>,
+    /// Closest pair of vehicles, m.
+    pub min_pair_m: Option<f64>,
+    /// Closest any vehicle's centre came to an obstacle, m.
+    pub clearance_m: Option<f64>,
+    /// Longest time any follower was without a fix of its parent, s.
+    pub parent_gap_s: Option<f64>,
+    /// Slot error RMS over the last 30 s, m.
+    pub final_rms_m: Option<f64>,
+    /// Leader's distance from its goal at the end, m.
+    pub goal_error_m: Option<f64>,
+    /// Wall-clock time of the run, s.
+    pub wall_s: f64,
+}
+
+/// Why a campaign cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum CampaignError {
+    /// No course.
+    #[error("--courses 0: a campaign needs at least one course")]
+    NoCourses,
+    /// No seed.
+    #[error("--seeds 0: a campaign needs at least one seed")]
+    NoSeeds,
+    /// No family.
+    #[error("no family of courses given")]
+    NoFamilies,
+}
+
+/// The runs of a campaign, in order.
+pub fn jobs(o: &CampaignOptions) -> Result<Vec<Job>, CampaignError> {
+    if o.courses == 0 {
+        return Err(CampaignError::NoCourses);
+    }
+    if o.seeds == 0 {
+        return Err(CampaignError::NoSeeds);
+    }
+    if o.families.is_empty() {
+        return Err(CampaignError::NoFamilies);
+    }
+    let f = o.families.len();
+    let mut out = Vec::new();
+    for i in 0..o.courses {
+        let family = o.families[i % f];
+        let course_seed = (i / f) as u64;
+        for seed in 0..o.seeds {
+            out.push(Job {
+                name: format!(
+                    "{family}{course_seed}-{}-{}-s{seed}",
+                    o.shape.name(),
+                    o.vehicles
+                ),
+                family,
+                course_seed,
+                seed,
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// What keeps a run from passing (empty: it passes): the safety verdict,
+/// then the slot error over the last [`FINAL_WINDOW_S`] (at most
+/// [`FINAL_RMS_LIMIT_M`]) and the leader within [`GOAL_LIMIT_M`] of its goal.
+pub fn judge(s: &Summary) -> Vec<String> {
+    let mut failed = s.verdict.failed.clone();
+    match s.formation.slot_error_rms_final_m {
+        Some(x) if x < FINAL_RMS_LIMIT_M => {}
+        Some(x) => failed.push(format!(
+            "slot error RMS {x:.2} m over the last {FINAL_WINDOW_S} s (limit {FINAL_RMS_LIMIT_M} m)"
+        )),
+        None => failed.push(format!("no slot error over the last {FINAL_WINDOW_S} s")),
+    }
+    match s.mission.leader_goal_error_m {
+        Some(x) if x <= GOAL_LIMIT_M => {}
+        Some(x) => failed.push(format!(
+            "leader {x:.2} m from its goal (limit {GOAL_LIMIT_M} m)"
+        )),
+        None => failed.push("leader's distance from its goal unknown".into()),
+    }
+    failed
+}
+
+/// The row of a finished run from its summary.
+pub fn row(job: &Job, dir: &Path, s: &Summary) -> RunRow {
+    let failed = judge(s);
+    RunRow {
+        name: job.name.clone(),
+        family: job.family.name().to_string(),
+        course_seed: job.course_seed,
+        seed: job.seed,
+        dir: dir.display().to_string(),
+        status: if failed.is_empty() {
+            Status::Pass
+        } else {
+            Status::Fail
+        },
+        failed,
+        min_pair_m: s.safety.min_pair_distance_m,
+        clearance_m: s.safety.min_obstacle_clearance_m,
+        parent_gap_s: s
+            .perception
+            .longest_parent_gap_s
+            .values()
+            .copied()
+            .reduce(f64::max),
+        final_rms_m: s.formation.slot_error_rms_final_m,
+        goal_error_m: s.mission.leader_goal_error_m,
+        wall_s: s.wall_time_s,
+    }
+}
+
+fn unfinished(job: &Job, dir: &Path, status: Status, why: String) -> RunRow {
+    RunRow {
+        name: job.name.clone(),
+        family: job.family.name().to_string(),
+        course_seed: job.course_seed,
+        seed: job.seed,
+        dir: dir.display().to_string(),
+        status,
+        failed: vec![why],
+        min_pair_m: None,
+        clearance_m: None,
+        parent_gap_s: None,
+        final_rms_m: None,
+        goal_error_m: None,
+        wall_s: 0.0,
+    }
+}
+
+/// Writes the scenario of every job into `OUT/courses/` (each checked as
+/// `shoal check` would).
+fn write_courses(o: &CampaignOptions, jobs: &[Job]) -> anyhow::Result<()> {
+    let dir = o.out.join("courses");
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    for j in jobs {
+        let text = gen::generate(&GenOptions {
+            vehicles: o.vehicles,
+            shape: o.shape,
+            spacing_m: o.spacing_m,
+            seed: j.seed,
+            course: Some(j.family),
+            course_seed: Some(j.course_seed),
+            name: Some(j.name.clone()),
+            ..GenOptions::default()
+        })
+        .with_context(|| format!("generating {}", j.name))?;
+        let path = dir.join(format!("{}.toml", j.name));
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// Runs the campaign and writes its report into `o.out`.
+pub fn run(o: &CampaignOptions) -> anyhow::Result<Report> {
+    use iceoryx2_bb_posix::signal::SignalHandler;
+    let jobs = jobs(o)?;
+    write_courses(o, &jobs)?;
+    // installs the SIGINT/SIGTERM handler
+    let _ = SignalHandler::termination_requested();
+    let bar = if o.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(jobs.len() as u64)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:30}] {pos}/{len} runs ({eta} left) {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    let mut rows: Vec<Option<RunRow>> = vec![None; jobs.len()];
+    let mut todo = Vec::new();
+    for (i, j) in jobs.iter().enumerate() {
+        let dir = o.out.join("runs").join(&j.name);
+        match Summary::read(&dir.join("summary.json")) {
+            Ok(s) => {
+                rows[i] = Some(row(j, &dir, &s));
+                bar.inc(1);
+            }
+            Err(_) => todo.push(i),
+        }
+    }
+    let (tx, rx) = mpsc::channel::<(usize, i32, std::io::Result<std::process::ExitStatus>)>();
+    let mut running: Vec<(usize, i32)> = Vec::new();
+    let mut next = 0;
+    let mut stopping = false;
+    let (mut passed, mut failed) = (0usize, 0usize);
+    for r in rows.iter().flatten() {
+        if r.status == Status::Pass {
+            passed += 1;
+        } else {
+            failed += 1;
+        }
+    }
+    loop {
+        while !stopping && running.len() < o.jobs.max(1) && next < todo.len() {
+            let i = todo[next];
+            next += 1;
+            let job = &jobs[i];
+            let dir = o.out.join("runs").join(&job.name);
+            if dir.exists() {
+                std::fs::remove_dir_all(&dir)
+                    .with_context(|| format!("cannot clear {}", dir.display()))?;
+            }
+            std::fs::create_dir_all(&dir)?;
+            let log = std::fs::File::create(dir.join("run.log"))?;
+            let mut cmd = Command::new(&o.shoal);
+            cmd.arg("run")
+                .arg(o.out.join("courses").join(format!("{}.toml", job.name)))
+                .arg("--out")
+                .arg(&dir)
+                .arg("--quiet")
+                .stdin(Stdio::null())
+                .stdout(log.try_clone()?)
+                .stderr(log);
+            if let Some(b) = &o.bin_dir {
+                cmd.arg("--bin-dir").arg(b);
+            }
+            crate::launch::os::die_with_parent(&mut cmd);
+            let mut child = cmd
+                .spawn()
+                .with_context(|| format!("cannot start {}", o.shoal.display()))?;
+            let pid = child.id() as i32;
+            running.push((i, pid));
+            let tx = tx.clone();
+            std::thread::spawn(move || {
+                let r = child.wait();
+                let _ = tx.send((i, pid, r));
+            });
+        }
+        if running.is_empty() {
+            break;
+        }
+        let got = rx.recv_timeout(std::time::Duration::from_millis(500));
+        if !stopping && SignalHandler::termination_requested() {
+            stopping = true;
+            bar.println("interrupted: stopping the runs under way");
+            for &(_, pid) in &running {
+                crate::launch::os::send_signal(pid, libc::SIGINT);
+            }
+        }
+        let Ok((i, pid, status)) = got else { continue };
+        running.retain(|&(_, p)| p != pid);
+        let job = &jobs[i];
+        let dir = o.out.join("runs").join(&job.name);
+        let r = match Summary::read(&dir.join("summary.json")) {
+            Ok(s) => row(job, &dir, &s),
+            Err(_) if stopping => unfinished(job, &dir, Status::Interrupted, "interrupted".into()),
+            Err(e) => unfinished(
+                job,
+                &dir,
+                Status::Error,
+                format!(
+                    "the run failed ({}; see {}): {e}",
+                    match status {
+                        Ok(s) => s.to_string(),
+                        Err(e) => e.to_string(),
+                    },
+                    dir.join("run.log").display()
+                ),
+            ),
+        };
+        if r.status == Status::Pass {
+            passed += 1;
+            if !o.keep_recordings {
+                let _ = std::fs::remove_file(dir.join("recording.mcap"));
+            }
+        } else if r.status != Status::Interrupted {
+            failed += 1;
+            bar.println(format!("FAIL {}: {}", r.name, r.failed.join("; ")));
+        }
+        rows[i] = Some(r);
+        bar.set_message(format!("{passed} pass, {failed} fail"));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let rows: Vec<RunRow> = rows.into_iter().flatten().collect();
+    let report = Report::new(o, rows);
+    write_report(&report, &o.out)?;
+    Ok(report)
+}

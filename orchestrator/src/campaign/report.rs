@@ -1,0 +1,184 @@
+//! The campaign's report: pass rate per family and overall, the worst
+//! figures, the failing runs with what failed; as Markdown
+//! (`campaign.md`), JSON (`campaign.json`) and a plot (`campaign.png`,
+//! `campaign.svg`).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::Context;
+use serde::{Deserialize, Serialize};
+
+use super::{CampaignOptions, RunRow, Status, FINAL_RMS_LIMIT_M, GOAL_LIMIT_M};
+use crate::analysis::summary::{fmt_or_na, PARENT_LOST_LIMIT_S};
+
+/// Pass rate and worst figures of a set of runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Tally {
+    /// Family name, or `all`.
+    pub family: String,
+    /// Runs finished (interrupted ones not counted).
+    pub runs: usize,
+    /// Runs that passed.
+    pub passed: usize,
+    /// `passed / runs` (`null` with no runs).
+    pub pass_rate: Option<f64>,
+    /// Smallest min pair distance, m.
+    pub worst_min_pair_m: Option<f64>,
+    /// Smallest obstacle clearance, m.
+    pub worst_clearance_m: Option<f64>,
+    /// Longest time a follower was without its parent, s.
+    pub worst_parent_gap_s: Option<f64>,
+    /// Largest slot error RMS over the last 30 s, m.
+    pub worst_final_rms_m: Option<f64>,
+    /// Largest distance of the leader from its goal, m.
+    pub worst_goal_error_m: Option<f64>,
+}
+
+fn min_of(it: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    it.flatten().reduce(f64::min)
+}
+fn max_of(it: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    it.flatten().reduce(f64::max)
+}
+
+impl Tally {
+    /// The tally of `rows` (those of status pass, fail or error).
+    pub fn of<'a>(family: &str, rows: impl Iterator<Item = &'a RunRow> + Clone) -> Self {
+        let done = rows.filter(|r| r.status != Status::Interrupted);
+        let runs = done.clone().count();
+        let passed = done.clone().filter(|r| r.status == Status::Pass).count();
+        Self {
+            family: family.to_string(),
+            runs,
+            passed,
+            pass_rate: (runs > 0).then(|| passed as f64 / runs as f64),
+            worst_min_pair_m: min_of(done.clone().map(|r| r.min_pair_m)),
+            worst_clearance_m: min_of(done.clone().map(|r| r.clearance_m)),
+            worst_parent_gap_s: max_of(done.clone().map(|r| r.parent_gap_s)),
+            worst_final_rms_m: max_of(done.clone().map(|r| r.final_rms_m)),
+            worst_goal_error_m: max_of(done.map(|r| r.goal_error_m)),
+        }
+    }
+}
+
+/// Everything the campaign found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Report {
+    /// Formation shape.
+    pub shape: String,
+    /// Vehicles.
+    pub vehicles: usize,
+    /// Courses.
+    pub courses: usize,
+    /// Seeds per course.
+    pub seeds: u64,
+    /// Per family, in the order given.
+    pub by_family: Vec<Tally>,
+    /// Over every run.
+    pub overall: Tally,
+    /// Runs stopped by Ctrl-C.
+    pub interrupted: usize,
+    /// Every run, in order.
+    pub runs: Vec<RunRow>,
+}
+
+impl Report {
+    /// The report of `rows`.
+    pub fn new(o: &CampaignOptions, rows: Vec<RunRow>) -> Self {
+        let by_family = o
+            .families
+            .iter()
+            .map(|f| Tally::of(f.name(), rows.iter().filter(|r| r.family == f.name())))
+            .collect();
+        Self {
+            shape: o.shape.name().to_string(),
+            vehicles: o.vehicles,
+            courses: o.courses,
+            seeds: o.seeds,
+            by_family,
+            overall: Tally::of("all", rows.iter()),
+            interrupted: rows
+                .iter()
+                .filter(|r| r.status == Status::Interrupted)
+                .count(),
+            runs: rows,
+        }
+    }
+
+    /// The runs that did not pass (interrupted ones aside).
+    pub fn failures(&self) -> impl Iterator<Item = &RunRow> {
+        self.runs
+            .iter()
+            .filter(|r| matches!(r.status, Status::Fail | Status::Error))
+    }
+
+    /// The table as Markdown: one row per family and one for all, then the
+    /// failing runs with their paths and what failed.
+    pub fn markdown(&self) -> String {
+        let mut t = String::new();
+        let na = fmt_or_na;
+        let _ = writeln!(
+            t,
+            "# Campaign: {} of {} vehicles, {} courses × {} seeds\n",
+            self.shape, self.vehicles, self.courses, self.seeds
+        );
+        let _ = writeln!(
+            t,
+            "A run passes with no collision of either kind, min pair ≥ the safe distance, \
+             clearance ≥ half of it, no parent lost over {PARENT_LOST_LIMIT_S} s, slot error \
+             RMS over the last 30 s < {FINAL_RMS_LIMIT_M} m and the leader within \
+             {GOAL_LIMIT_M} m of its goal.\n"
+        );
+        let _ = writeln!(
+            t,
+            "| family | runs | pass | pass rate | worst min pair (m) | worst clearance (m) | \
+             worst parent gap (s) | worst final RMS (m) | worst goal error (m) |"
+        );
+        let _ = writeln!(t, "|---|---|---|---|---|---|---|---|---|");
+        for f in self.by_family.iter().chain(std::iter::once(&self.overall)) {
+            let _ = writeln!(
+                t,
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                f.family,
+                f.runs,
+                f.passed,
+                f.pass_rate
+                    .map_or("n/a".to_string(), |r| format!("{:.1} %", 100.0 * r)),
+                na(f.worst_min_pair_m, 2),
+                na(f.worst_clearance_m, 2),
+                na(f.worst_parent_gap_s, 1),
+                na(f.worst_final_rms_m, 2),
+                na(f.worst_goal_error_m, 2),
+            );
+        }
+        if self.interrupted > 0 {
+            let _ = writeln!(
+                t,
+                "\n{} run(s) interrupted (not counted).",
+                self.interrupted
+            );
+        }
+        let failures: Vec<&RunRow> = self.failures().collect();
+        if failures.is_empty() {
+            let _ = writeln!(t, "\nNo run failed.");
+        } else {
+            let _ = writeln!(t, "\n## Failing runs\n");
+            for r in failures {
+                let _ = writeln!(t, "- `{}`: {}", r.dir, r.failed.join("; "));
+            }
+        }
+        t
+    }
+}
+
+/// Writes `campaign.md`, `campaign.json` and the plot into `dir`.
+pub fn write_report(r: &Report, dir: &Path) -> anyhow::Result<()> {
+    let md = dir.join("campaign.md");
+    std::fs::write(&md, r.markdown()).with_context(|| format!("cannot write {}", md.display()))?;
+    let json = dir.join("campaign.json");
+    std::fs::write(&json, serde_json::to_string_pretty(r)?)
+        .with_context(|| format!("cannot write {}", json.display()))?;
+    crate::plots::write_campaign_plot(r, dir).context("drawing the campaign plot")?;
+    Ok(())
+}
