@@ -772,10 +772,23 @@ impl FollowerPlanner {
         // headway: v̄ is kept in the parent's level frame, so that a steady turn is steady
         let v_level = to_level(yaw_parent, &vel);
         let gain = (dt / self.cfg.headway_avg_s).min(1.0);
-        let (mean_v, mean_r) = match self.slot.headway_mean {
+        let (mut mean_v, mut mean_r) = match self.slot.headway_mean {
             Some((v, r)) => (v + (v_level - v) * gain, r + (r_parent - r) * gain),
             None => (v_level, r_parent),
         };
+        // The formation is never taken to move faster, or turn faster, than the target
+        // does now: when the parent slows to a stop (or ends a turn) the slow average
+        // would otherwise keep `v̄` (`r̄`) up for a minute and put the target that far
+        // ahead of the slot (turned into the finished turn) while everyone is at rest.
+        let cap = v_level.norm();
+        if mean_v.norm() > cap {
+            mean_v *= cap / mean_v.norm();
+        }
+        if mean_r * r_parent <= 0.0 {
+            mean_r = 0.0;
+        } else if mean_r.abs() > r_parent.abs() {
+            mean_r = r_parent;
+        }
         self.slot.headway_mean = Some((mean_v, mean_r));
         let headway = (v_own - from_level(yaw_parent, &mean_v)) * self.cfg.headway_s;
         let pos = p_parent + arm - headway;
