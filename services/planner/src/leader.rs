@@ -52,6 +52,9 @@ use crate::types::{
 
 /// Remembered obstacle points of the leader.
 pub const LEADER_MEMORY_CAPACITY: usize = 256;
+/// How far behind the leader remembered returns still constrain its offset when the
+/// whole window (`memory_behind_m`) leaves no offset clear, m.
+pub const OWN_BEHIND_M: f64 = 3.0;
 
 /// The leader's mission and avoidance (`[mission]` in a scenario).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -78,6 +81,16 @@ pub struct LeaderConfig {
     pub max_offset_m: f64,
     /// Largest rate of change of the offset, m/s (default 0.4).
     pub offset_rate_mps: f64,
+    /// An obstacle is taken to continue this far beyond each return along the beam that
+    /// saw it, m (default 5): the water before a return is clear, what lies behind it is
+    /// not known, and a wall seen from inside a gap must not be passed on its far side.
+    pub shadow_m: f64,
+    /// Returns closer than this to a remembered one refresh it instead of adding a point,
+    /// m (default 0.5).
+    pub memory_cell_m: f64,
+    /// An offset on the other side of the track than the current one must be shorter by
+    /// this much to be chosen, m (default 1).
+    pub side_margin_m: f64,
     /// Line-of-sight lookahead for the heading, m (default 5).
     pub los_lookahead_m: f64,
     /// The virtual target is at most this far ahead of the leader's projection, m (default 2).
@@ -109,6 +122,9 @@ impl Default for LeaderConfig {
             memory_max_age_s: 120.0,
             max_offset_m: 15.0,
             offset_rate_mps: 0.4,
+            shadow_m: 5.0,
+            memory_cell_m: 0.5,
+            side_margin_m: 1.0,
             los_lookahead_m: 5.0,
             max_lead_m: 2.0,
             decel_mps2: 0.05,
@@ -146,6 +162,9 @@ impl LeaderConfig {
         check_pos("mission.memory_max_age_s", self.memory_max_age_s)?;
         check_nonneg("mission.max_offset_m", self.max_offset_m)?;
         check_pos("mission.offset_rate_mps", self.offset_rate_mps)?;
+        check_nonneg("mission.shadow_m", self.shadow_m)?;
+        check_pos("mission.memory_cell_m", self.memory_cell_m)?;
+        check_nonneg("mission.side_margin_m", self.side_margin_m)?;
         check_pos("mission.los_lookahead_m", self.los_lookahead_m)?;
         check_pos("mission.max_lead_m", self.max_lead_m)?;
         check_pos("mission.decel_mps2", self.decel_mps2)?;
@@ -186,6 +205,10 @@ pub struct LeaderInput {
 struct MemPoint {
     t: f64,
     pos: Vector3<f64>,
+    /// Horizontal unit direction of the beam that saw it, NED: the water
+    /// between the transducer and the point is clear, the obstacle lies
+    /// beyond it.
+    ray: Vector3<f64>,
 }
 
 /// The leader planner. See the [module docs](self) for the method.
@@ -210,8 +233,8 @@ pub struct LeaderPlanner {
     v_cmd: f64,
     nav: PositionFilter,
     memory: Vec<MemPoint>,
-    /// Scratch: cross-track positions of the returns in the window.
-    window: Vec<f64>,
+    /// Scratch: cross-track extents `(lo, hi)` of the returns in the window.
+    window: Vec<(f64, f64)>,
     /// Joins a mission in progress (a restarted planner): see [`Self::resume`].
     resuming: bool,
 }
@@ -250,6 +273,79 @@ impl LeaderPlanner {
     /// from rest, so the group behind it sees no sudden stop.
     pub fn resume(&mut self) {
         self.resuming = true;
+    }
+
+    /// The wanted track offset given the remembered returns from `behind` back to
+    /// `lookahead_m` ahead along the leg (`a` its start, `tg`/`nrm` its tangent and
+    /// starboard normal) for a clearance `c`; `es` is scratch (left holding the extents).
+    #[allow(clippy::too_many_arguments)]
+    fn wanted_offset(
+        &self,
+        es: &mut Vec<(f64, f64)>,
+        pos: &Vector3<f64>,
+        a: &Vector3<f64>,
+        tg: &Vector3<f64>,
+        nrm: &Vector3<f64>,
+        behind: f64,
+        c: f64,
+    ) -> Option<f64> {
+        es.clear();
+        let shadow = self.cfg.shadow_m;
+        es.extend(self.memory.iter().filter_map(|m| {
+            let along = (m.pos - pos).dot(tg);
+            (along >= -behind && along <= self.cfg.lookahead_m).then(|| {
+                let e = (m.pos - a).dot(nrm);
+                let f = e + shadow * m.ray.dot(nrm);
+                (e.min(f), e.max(f))
+            })
+        }));
+        es.sort_unstable_by(|x, y| x.0.total_cmp(&y.0)); // in place, no allocation
+        let max_offset = self.cfg.max_offset_m;
+        let feasible = |o: f64| {
+            if o.abs() > max_offset + 1e-9 {
+                return false;
+            }
+            // no extent reaches within c of o
+            es.iter()
+                .take_while(|(lo, _)| *lo < o + c - 1e-9)
+                .all(|(_, hi)| *hi <= o - c + 1e-9)
+        };
+        let mut best: Option<f64> = None;
+        // crossing to the other side of the track costs `side_margin_m`: a side is
+        // changed for a clearly shorter way round, never by a tie that noise decides
+        let side_margin = self.cfg.side_margin_m;
+        let cur = self.offset_goal;
+        let cost = |x: f64| {
+            x.abs()
+                + if x * cur < 0.0 && cur.abs() > 1e-9 {
+                    side_margin
+                } else {
+                    0.0
+                }
+        };
+        let better = |o: f64, b: f64| {
+            let (ko, kb) = (cost(o), cost(b));
+            if (ko - kb).abs() > 1e-9 {
+                return ko < kb;
+            }
+            let (co, cb) = ((o - cur).abs(), (b - cur).abs());
+            if (co - cb).abs() > 1e-9 {
+                return co < cb;
+            }
+            o > b
+        };
+        let mut consider = |o: f64| {
+            if feasible(o) && best.is_none_or(|b| better(o, b)) {
+                best = Some(o);
+            }
+        };
+        consider(0.0);
+        consider(cur);
+        for (lo, hi) in es.iter() {
+            consider(hi + c);
+            consider(lo - c);
+        }
+        best
     }
 
     /// The configuration.
@@ -410,11 +506,25 @@ impl LeaderPlanner {
         // memory of returns, NED
         if let Some(scan) = &input.sonar {
             for (d, az, el) in scan.returns() {
+                let p = pos + att * (self.mount + beam_vector(d, az, el));
+                let dir = att * beam_vector(1.0, az, el);
+                let ray = Vector3::new(dir.x, dir.y, 0.0);
+                let ray = ray / ray.norm().max(1e-9);
+                // one point per cell: a wall seen for a minute stays a wall, not the
+                // last few seconds of echoes
+                let cell = self.cfg.memory_cell_m;
+                if let Some(m) = self
+                    .memory
+                    .iter_mut()
+                    .find(|m| (m.pos.xy() - p.xy()).norm() < cell)
+                {
+                    *m = MemPoint { t, pos: p, ray };
+                    continue;
+                }
                 if self.memory.len() == LEADER_MEMORY_CAPACITY {
                     self.memory.remove(0);
                 }
-                let p = pos + att * (self.mount + beam_vector(d, az, el));
-                self.memory.push(MemPoint { t, pos: p });
+                self.memory.push(MemPoint { t, pos: p, ray });
             }
         }
         let (behind, max_age) = (self.cfg.memory_behind_m, self.cfg.memory_max_age_s);
@@ -465,46 +575,19 @@ impl LeaderPlanner {
         let len = self.cum[self.leg + 1] - self.cum[self.leg];
         let s_proj = self.cum[self.leg] + (pos - a).dot(&tg).clamp(0.0, len);
 
-        // avoidance: the wanted offset, from the sorted cross-track positions in the window
+        // avoidance: the wanted offset, from the cross-track extents in the window (each
+        // return and its shadow: the obstacle continues `shadow_m` beyond it along the beam).
+        // The window reaches `memory_behind_m` back, so the offset is kept until the
+        // formation behind has passed; if nothing is clear of that whole window (a second
+        // gap, offset the other way, close behind the first) only the leader's own
+        // `OWN_BEHIND_M` counts, rather than stopping with the way ahead open.
         let mut es = std::mem::take(&mut self.window);
-        es.clear();
-        es.extend(self.memory.iter().filter_map(|m| {
-            let along = (m.pos - pos).dot(&tg);
-            (along >= -behind && along <= self.cfg.lookahead_m).then(|| (m.pos - a).dot(&nrm))
-        }));
-        es.sort_unstable_by(f64::total_cmp); // in place, no allocation
-        let max_offset = self.cfg.max_offset_m;
-        let feasible = |o: f64| {
-            if o.abs() > max_offset + 1e-9 {
-                return false;
-            }
-            // the first point at or above o − c must be at least o + c
-            let i = es.partition_point(|e| *e <= o - c + 1e-9);
-            es.get(i).is_none_or(|e| *e >= o + c - 1e-9)
-        };
         let mut best: Option<f64> = None;
-        let better = |o: f64, b: f64, cur: f64| {
-            let (ko, kb) = (o.abs(), b.abs());
-            if (ko - kb).abs() > 1e-9 {
-                return ko < kb;
+        for reach in [behind, behind.min(OWN_BEHIND_M)] {
+            best = self.wanted_offset(&mut es, &pos, &a, &tg, &nrm, reach, c);
+            if best.is_some() {
+                break;
             }
-            let (co, cb) = ((o - cur).abs(), (b - cur).abs());
-            if (co - cb).abs() > 1e-9 {
-                return co < cb;
-            }
-            o > b
-        };
-        let cur = self.offset_goal;
-        let mut consider = |o: f64| {
-            if feasible(o) && best.is_none_or(|b| better(o, b, cur)) {
-                best = Some(o);
-            }
-        };
-        consider(0.0);
-        consider(cur);
-        for e in &es {
-            consider(e + c);
-            consider(e - c);
         }
         let blocked = best.is_none();
         if let Some(o) = best {
@@ -520,7 +603,7 @@ impl LeaderPlanner {
         };
         let delta_min = es
             .iter()
-            .map(|e| (e - self.offset).abs())
+            .map(|(lo, hi)| (lo - self.offset).max(self.offset - hi).max(0.0))
             .fold(f64::INFINITY, f64::min);
         self.window = es;
 

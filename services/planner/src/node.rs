@@ -23,6 +23,9 @@ pub fn follower_config(scenario: &Scenario, name: &str) -> anyhow::Result<Follow
     let spec = scenario.vehicle(name).context("vehicle not in scenario")?;
     cfg.slot_in_parent_m = spec.slot_m.context("a follower needs slot_m")?;
     cfg.d_min_m = scenario.safety.safe_distance_m;
+    if !scenario.follower.contains_key("memory_behind_m") {
+        cfg.memory_behind_m = memory_behind_m(scenario, name, cfg.memory_behind_m);
+    }
     cfg.d_a_m = spec
         .d_a_m
         .context("d_a_m not resolved: start the planner through `shoal run`")?;
@@ -30,6 +33,23 @@ pub fn follower_config(scenario: &Scenario, name: &str) -> anyhow::Result<Follow
         .d_b_m
         .context("d_b_m not resolved: start the planner through `shoal run`")?;
     Ok(cfg)
+}
+
+/// Room behind the rearmost follower of an arm for its hull and its displacement, m.
+pub const MEMORY_BEHIND_MARGIN_M: f64 = 5.0;
+
+/// How long a vehicle remembers an obstacle (and keeps its avoidance) when the
+/// scenario does not say: until the farthest vehicle of the formation behind it
+/// ([`Scenario::reach_behind_m`]) is [`MEMORY_BEHIND_MARGIN_M`] past it, and at least
+/// the planner's `default`. A vehicle that returned to its track as soon as it was past
+/// would pull the followers still alongside the obstacle into it.
+pub fn memory_behind_m(scenario: &Scenario, name: &str, default: f64) -> f64 {
+    let reach = scenario.reach_behind_m(name);
+    if reach > 0.0 {
+        default.max(reach + MEMORY_BEHIND_MARGIN_M)
+    } else {
+        default
+    }
 }
 
 /// The one key of sim-plant's `[nav]` section the leader's position filter needs; absent →
@@ -70,6 +90,9 @@ impl<S: Service> PlannerTask<S> {
         let role = if spec.parent.is_none() {
             let mut cfg: LeaderConfig = scenario.section("mission")?;
             cfg.d_min_m = scenario.safety.safe_distance_m;
+            if !scenario.mission.contains_key("memory_behind_m") {
+                cfg.memory_behind_m = memory_behind_m(scenario, me, cfg.memory_behind_m);
+            }
             // The position filter's fix noise is the nav sensor's (sim-plant's `[nav]`).
             let nav: NavNoise = scenario.section("nav")?;
             if let Some(n) = nav.position_noise_m.filter(|n| *n > 0.0) {

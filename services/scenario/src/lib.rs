@@ -859,6 +859,38 @@ impl Scenario {
             .collect()
     }
 
+    /// How far behind `name` its farthest descendant in the formation tree
+    /// starts, along `name`'s heading, m (0 for a vehicle nobody follows): the
+    /// length of the arm of the formation that passes an obstacle after it.
+    pub fn reach_behind_m(&self, name: &str) -> f64 {
+        let starts = self.start_poses();
+        let Some(&(me, yaw)) = starts.get(name) else {
+            return 0.0;
+        };
+        let parent: HashMap<&str, Option<&str>> = self
+            .vehicles
+            .iter()
+            .map(|v| (v.name.as_str(), v.parent.as_deref()))
+            .collect();
+        let (sn, cs) = yaw.sin_cos();
+        let mut reach = 0.0f64;
+        for v in &self.vehicles {
+            let mut cur = v.parent.as_deref();
+            let mut hops = 0;
+            while let Some(p) = cur.filter(|_| hops < self.vehicles.len()) {
+                if p == name {
+                    if let Some(&(pv, _)) = starts.get(&v.name) {
+                        reach = reach.max(cs * (me[0] - pv[0]) + sn * (me[1] - pv[1]));
+                    }
+                    break;
+                }
+                hops += 1;
+                cur = parent.get(p).copied().flatten();
+            }
+        }
+        reach
+    }
+
     /// Every process of the run in a fixed order: world, recorder, then per
     /// vehicle sim-plant, camera-pose (followers only), sonar, planner, mpc.
     pub fn processes(&self) -> Vec<ProcessSpec> {
