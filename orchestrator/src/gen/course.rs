@@ -9,17 +9,19 @@
 //! [`super::WALL_OVERHANG_M`] past the outermost file, and the seed draws
 //! where, how long, how far off the track and which way.
 //!
-//! Gaps never sit on a turn: a gate starts at least [`TURN_CLEAR_M`] after a
-//! turn's vertex, and a turn comes at least the group's length plus
-//! [`TURN_AFTER_GATE_M`] after a gate, so the formation turns in open water
-//! (but its followers may still be shifted when the leader turns).
+//! Gaps never sit on a turn: the leader flies a corner as an arc of the
+//! radius its formation's view margin allows ([`planner::view`]); a gate
+//! starts at least [`TURN_CLEAR_M`] past the arc's end, and the arc starts
+//! at least the group's length plus [`TURN_AFTER_GATE_M`] after a gate, so
+//! the formation turns in open water (but its followers may still be
+//! shifted when the leader turns).
 
 use std::f64::consts::PI;
 
 use super::{SplitMix, WALL_OVERHANG_M};
 
-/// How far past a turn's vertex the next gate starts at the least, m.
-pub const TURN_CLEAR_M: f64 = 35.0;
+/// How far past the end of a turn's arc the next gate starts at the least, m.
+pub const TURN_CLEAR_M: f64 = 25.0;
 /// How far past a gate's end (beyond the group's length) a turn comes at
 /// the least, m.
 pub const TURN_AFTER_GATE_M: f64 = 15.0;
@@ -138,6 +140,8 @@ pub struct Geom {
     pub z_offset_m: f64,
     /// Half height of a wall, m.
     pub half_height_m: f64,
+    /// Radius of the leader's turns, m (as the planner derives it).
+    pub turn_radius_m: f64,
 }
 
 /// A generated course.
@@ -279,14 +283,19 @@ impl<'a> Builder<'a> {
             self.route.extend(0.0, s - l, d);
         }
     }
+    /// How far before and after its vertex the leader's arc of a turn of
+    /// `deg` reaches, m.
+    fn tangent(&self, deg: f64) -> f64 {
+        self.g.turn_radius_m * (deg.to_radians().abs() / 2.0).tan()
+    }
     /// A turn of `deg` at arc length `s`.
     fn turn_at(&mut self, s: f64, deg: f64) {
         self.straight_to(s);
         let d = self.depth();
-        // a zero-length leg carries the new heading
+        // a short leg carries the new heading
         self.route.extend(deg.to_radians(), 1.0, d);
         self.turns_deg.push(deg);
-        self.end_m = self.end_m.max(s);
+        self.end_m = self.end_m.max(s + self.tangent(deg));
     }
     /// A box whose centre is `s` along and `e` across, with half extents
     /// (along, across) and its yaw relative to the route.
@@ -349,14 +358,15 @@ impl<'a> Builder<'a> {
         };
         (self.end_m + gap_m).max(after_turn).max(FIRST_FEATURE_M)
     }
-    /// Where a turn may come after everything so far.
-    fn next_turn_at(&mut self) -> f64 {
+    /// Where the vertex of a turn of `deg` may come after everything so far.
+    fn next_turn_at(&mut self, deg: f64) -> f64 {
+        let t = self.tangent(deg);
         let after_gate = if self.gates > 0 {
-            self.end_m + self.g.group_len_m + TURN_AFTER_GATE_M + 10.0 * self.u()
+            self.end_m + self.g.group_len_m + TURN_AFTER_GATE_M + 10.0 * self.u() + t
         } else {
             0.0
         };
-        after_gate.max(FIRST_FEATURE_M - 5.0 + 10.0 * self.u())
+        after_gate.max(FIRST_FEATURE_M - 5.0 + 10.0 * self.u() + t)
     }
 
     fn finish(mut self, family: Family, what: String) -> Course {
@@ -489,7 +499,7 @@ pub fn build(family: Family, g: Geom, seed: u64) -> Course {
             let deg = b.sign() * (30.0 + 60.0 * b.u());
             let v = b.u();
             let variant = if v < 1.0 / 3.0 {
-                let at = b.next_turn_at();
+                let at = b.next_turn_at(deg);
                 b.turn_at(at, deg);
                 let s0 = b.next_gate_start(0.0) + 10.0 * b.u();
                 let len = b.wall_len();
@@ -499,7 +509,7 @@ pub fn build(family: Family, g: Geom, seed: u64) -> Course {
                 let s0 = FIRST_FEATURE_M + 10.0 * b.u();
                 let len = b.wall_len();
                 b.gate(s0, len, len, 0.0);
-                let at = b.next_turn_at();
+                let at = b.next_turn_at(deg);
                 b.turn_at(at, deg);
                 let s1 = b.next_gate_start(0.0) + 10.0 * b.u();
                 let len = b.wall_len();
@@ -509,7 +519,7 @@ pub fn build(family: Family, g: Geom, seed: u64) -> Course {
                 let s0 = FIRST_FEATURE_M + 10.0 * b.u();
                 let len = b.wall_len();
                 b.gate(s0, len, len, 0.0);
-                let at = b.next_turn_at();
+                let at = b.next_turn_at(deg);
                 b.turn_at(at, deg);
                 "after a gap"
             };
@@ -517,9 +527,9 @@ pub fn build(family: Family, g: Geom, seed: u64) -> Course {
         }
         Family::SBend => {
             let deg = b.sign() * (30.0 + 30.0 * b.u());
-            let at = b.next_turn_at();
+            let at = b.next_turn_at(deg);
             b.turn_at(at, deg);
-            let leg = 30.0 + 20.0 * b.u();
+            let leg = 2.0 * b.tangent(deg) + 10.0 + 20.0 * b.u();
             b.turn_at(at + leg, -deg);
             let s0 = b.next_gate_start(0.0) + 10.0 * b.u();
             let len = b.wall_len();

@@ -363,6 +363,20 @@ fn assign(
         .map(|d| (d, SAFE_DISTANCE_M))
 }
 
+/// The radius the leader will fly the course's corners on (what the planner
+/// derives from the default camera and beacons, [`planner::view`]), m.
+fn turn_radius_m(members: &[Member]) -> f64 {
+    let camera = CameraConfig::default();
+    let beacons = camera_pose::BeaconLayout::default();
+    planner::view::view_margin_rad(
+        members.iter().filter_map(|m| m.slot_m),
+        &beacons.positions_body_m,
+        camera.mount_position_body_m,
+        camera.fov_deg.to_radians() / 2.0,
+    )
+    .map_or(0.0, |m| planner::view::turn_radius_m(m, SPEED_MPS))
+}
+
 /// Plans the scenario (everything but the text).
 pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
     let n = opts.vehicles;
@@ -509,6 +523,7 @@ pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
             min_depth_m: (6.0 + shift_up_m).ceil(),
             z_offset_m: (shift_down_m - shift_up_m) / 2.0,
             half_height_m: (shift_up_m + shift_down_m) / 2.0 + 10.0,
+            turn_radius_m: turn_radius_m(&members),
         };
         course::build(family, geom, opts.course_seed.unwrap_or(opts.seed))
     });

@@ -116,6 +116,20 @@ pub struct FollowerConfig {
     pub gate_chi2: f64,
     /// Rejected fixes in a row after which the observer restarts (default 3).
     pub max_rejections: u32,
+    /// Keep the parent in view: the target heading is turned toward the parent whenever
+    /// one of its beacons would lie within this margin of the image edge, deg (default 3;
+    /// 0 switches it off). Our addition: the paper's follower holds its parent's heading,
+    /// and in a turn that heading lags until the parent leaves the image.
+    pub view_margin_deg: f64,
+    /// Half the camera's horizontal field of view, deg (`shoal run` sets it from
+    /// `[camera] fov_deg`; default 45).
+    pub view_half_angle_deg: f64,
+    /// The camera's position in the body frame, m (`shoal run` sets it from
+    /// `[camera] mount_position_body_m`; default `[1.4, 0, 0]`).
+    pub camera_mount_body_m: [f64; 3],
+    /// The parent's beacons in its body frame, m (`shoal run` sets them from
+    /// `[beacons] positions_body_m`; default the default layout).
+    pub parent_beacons_body_m: Vec<[f64; 3]>,
 }
 
 impl Default for FollowerConfig {
@@ -144,6 +158,15 @@ impl Default for FollowerConfig {
             pose_noise_default_m: 0.3,
             gate_chi2: 16.27,
             max_rejections: 3,
+            view_margin_deg: 3.0,
+            view_half_angle_deg: 45.0,
+            camera_mount_body_m: [1.4, 0.0, 0.0],
+            parent_beacons_body_m: vec![
+                [-1.50, 0.00, 0.00],
+                [-1.00, 0.00, -0.40],
+                [-1.25, 0.40, 0.00],
+                [-1.25, -0.40, 0.00],
+            ],
         }
     }
 }
@@ -185,6 +208,8 @@ impl FollowerConfig {
         check_nonneg("follower.headway_s", self.headway_s)?;
         check_pos("follower.headway_avg_s", self.headway_avg_s)?;
         check_nonneg("follower.yaw_headway_s", self.yaw_headway_s)?;
+        check_nonneg("follower.view_margin_deg", self.view_margin_deg)?;
+        check_pos("follower.view_half_angle_deg", self.view_half_angle_deg)?;
         if self.reacquire_count == 0 {
             return Err(cfg_err(
                 "follower.reacquire_count",
@@ -621,14 +646,14 @@ impl FollowerPlanner {
                     self.slot.headway_mean = None;
                 }
                 self.slot.anchor = None;
-                self.track(dt, &v_own, input.nu[5])
+                self.track(dt, &v_own, input.nu[5], yaw_own)
             }
             Mode::Coasting if predicting => {
                 // Predicting: the slot behind the observer's prediction (it was predicted to
                 // `t` above). No anchor yet: the slowdown starts from the last predicted
                 // target when this phase ends.
                 self.slot.anchor = None;
-                let (p, v, y, _) = self.track(dt, &v_own, input.nu[5]);
+                let (p, v, y, _) = self.track(dt, &v_own, input.nu[5], yaw_own);
                 (p, v, y, Mode::Coasting)
             }
             Mode::Coasting => {
@@ -656,10 +681,18 @@ impl FollowerPlanner {
                 } else {
                     (0.0, 0.0)
                 };
+                // keep turning toward where the parent is predicted to be: a parent lost at
+                // the image edge in a turn comes back into view
+                let yaw = self.keep_in_view(
+                    anchor.yaw,
+                    yaw_own,
+                    &self.observer.position(),
+                    self.observer.yaw(),
+                );
                 (
                     anchor.pos + anchor.vel * s,
                     anchor.vel * f,
-                    anchor.yaw,
+                    yaw,
                     Mode::Coasting,
                 )
             }
@@ -733,6 +766,63 @@ impl FollowerPlanner {
         Ok(PlannerOutput { target, state })
     }
 
+    /// The target heading `yaw`, turned toward the parent just enough that every beacon
+    /// of the parent (estimated at `p_parent`, heading `yaw_parent`) lies at least
+    /// `view_margin_deg` inside the image edge: seen from the target heading, and, when
+    /// the camera's heading now (`yaw_own`, which lags the target in a turn) already has a
+    /// beacon beyond that margin, at least as far toward it as brings it back. `yaw` itself
+    /// when the beacons span more than the field of view allows.
+    fn keep_in_view(
+        &self,
+        yaw: f64,
+        yaw_own: f64,
+        p_parent: &Vector3<f64>,
+        yaw_parent: f64,
+    ) -> f64 {
+        if self.cfg.view_margin_deg <= 0.0 || self.cfg.parent_beacons_body_m.is_empty() {
+            return yaw;
+        }
+        let lim = (self.cfg.view_half_angle_deg - self.cfg.view_margin_deg).to_radians();
+        let m = self.cfg.camera_mount_body_m;
+        let cam = self.odo + from_level(yaw_own, &Vector3::new(m[0], m[1], 0.0));
+        // bearings of the beacons off a heading
+        let span = |heading: f64| {
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for b in &self.cfg.parent_beacons_body_m {
+                let p = p_parent + from_level(yaw_parent, &Vector3::new(b[0], b[1], 0.0));
+                let d = p - cam;
+                let beta = wrap(d.y.atan2(d.x) - heading);
+                lo = lo.min(beta);
+                hi = hi.max(beta);
+            }
+            (lo, hi)
+        };
+        let (lo, hi) = span(yaw);
+        if hi - lo > 2.0 * lim {
+            return yaw;
+        }
+        let mut y = if hi > lim {
+            wrap(yaw + (hi - lim))
+        } else if lo < -lim {
+            wrap(yaw + (lo + lim))
+        } else {
+            yaw
+        };
+        let (lo, hi) = span(yaw_own);
+        if hi > lim {
+            let least = wrap(yaw_own + (hi - lim));
+            if wrap(y - least) < 0.0 {
+                y = least;
+            }
+        } else if lo < -lim {
+            let most = wrap(yaw_own + (lo + lim));
+            if wrap(y - most) > 0.0 {
+                y = most;
+            }
+        }
+        y
+    }
+
     /// Age of the last fused fix after which the parent is lost (stale, predicted, coasted), s.
     fn lost_after_s(&self) -> f64 {
         self.cfg.stale_after_s + self.cfg.predict_s + self.cfg.coast_s
@@ -746,6 +836,7 @@ impl FollowerPlanner {
         dt: f64,
         v_own: &Vector3<f64>,
         r_own: f64,
+        yaw_own: f64,
     ) -> (Vector3<f64>, Vector3<f64>, f64, Mode) {
         let p_parent = self.observer.position();
         let v_parent = self.observer.velocity();
@@ -793,6 +884,7 @@ impl FollowerPlanner {
         let headway = (v_own - from_level(yaw_parent, &mean_v)) * self.cfg.headway_s;
         let pos = p_parent + arm - headway;
         let yaw = wrap(yaw_parent - self.cfg.yaw_headway_s * (r_own - mean_r));
+        let yaw = self.keep_in_view(yaw, yaw_own, &p_parent, yaw_parent);
         self.last_target_odo = Some((pos, vel, yaw));
         let returning = (filtered - self.slot.disp.slot).norm() > 0.05;
         let mode = if shift.active || returning {

@@ -81,6 +81,11 @@ pub struct LeaderConfig {
     pub max_offset_m: f64,
     /// Largest rate of change of the offset, m/s (default 0.4).
     pub offset_rate_mps: f64,
+    /// Radius of the arcs the leader flies its route's corners on, m (default 0: sharp
+    /// corners). `shoal run` sets it, unless the scenario does, from the formation's view
+    /// margin ([`crate::view::turn_radius_m`]) so that every follower keeps its parent in
+    /// view through a turn.
+    pub turn_radius_m: f64,
     /// An obstacle is taken to continue this far beyond each return along the beam that
     /// saw it, m (default 5): the water before a return is clear, what lies behind it is
     /// not known, and a wall seen from inside a gap must not be passed on its far side.
@@ -122,6 +127,7 @@ impl Default for LeaderConfig {
             memory_max_age_s: 120.0,
             max_offset_m: 15.0,
             offset_rate_mps: 0.4,
+            turn_radius_m: 0.0,
             shadow_m: 5.0,
             memory_cell_m: 0.5,
             side_margin_m: 1.0,
@@ -163,6 +169,7 @@ impl LeaderConfig {
         check_nonneg("mission.max_offset_m", self.max_offset_m)?;
         check_pos("mission.offset_rate_mps", self.offset_rate_mps)?;
         check_nonneg("mission.shadow_m", self.shadow_m)?;
+        check_nonneg("mission.turn_radius_m", self.turn_radius_m)?;
         check_pos("mission.memory_cell_m", self.memory_cell_m)?;
         check_nonneg("mission.side_margin_m", self.side_margin_m)?;
         check_pos("mission.los_lookahead_m", self.los_lookahead_m)?;
@@ -220,6 +227,9 @@ pub struct LeaderPlanner {
     path: Vec<Vector3<f64>>,
     /// For each path vertex, the index of the waypoint it is.
     wp_of: Vec<usize>,
+    /// For each path vertex, whether it is a point of a corner's arc (passed on the
+    /// projection only: the acceptance radius would skip several short arc legs at once).
+    on_arc: Vec<bool>,
     /// Cumulative length at each vertex.
     cum: Vec<f64>,
     started: bool,
@@ -248,6 +258,7 @@ impl LeaderPlanner {
             mount: Vector3::from(cfg.sonar_mount_body_m),
             path: Vec::with_capacity(n),
             wp_of: Vec::with_capacity(n),
+            on_arc: Vec::with_capacity(n),
             cum: Vec::with_capacity(n),
             started: false,
             t_prev: 0.0,
@@ -420,7 +431,79 @@ impl LeaderPlanner {
                 }
             }
         }
+        self.round_corners();
         self.started = true;
+    }
+
+    /// Replaces every corner of the path (a turn of more than 1°) by an arc of
+    /// `turn_radius_m` (less where the legs are too short for it), as vertices 5° apart.
+    fn round_corners(&mut self) {
+        let r = self.cfg.turn_radius_m;
+        if r <= 0.0 || self.path.len() < 3 {
+            return;
+        }
+        let horiz = |v: Vector3<f64>| Vector3::new(v.x, v.y, 0.0);
+        let (path, wp) = (
+            std::mem::take(&mut self.path),
+            std::mem::take(&mut self.wp_of),
+        );
+        self.on_arc.clear();
+        self.path.push(path[0]);
+        self.wp_of.push(wp[0]);
+        self.on_arc.push(false);
+        for i in 1..path.len() - 1 {
+            let (p0, p1, p2) = (path[i - 1], path[i], path[i + 1]);
+            let (d_in, d_out) = (horiz(p1 - p0), horiz(p2 - p1));
+            let (l_in, l_out) = (d_in.norm(), d_out.norm());
+            let (t_in, t_out) = (d_in / l_in.max(1e-9), d_out / l_out.max(1e-9));
+            let theta = (t_in.x * t_out.y - t_in.y * t_out.x).atan2(t_in.dot(&t_out));
+            if theta.abs() < 1f64.to_radians() || l_in < 1e-6 || l_out < 1e-6 {
+                self.path.push(p1);
+                self.wp_of.push(wp[i]);
+                self.on_arc.push(false);
+                continue;
+            }
+            let half = (theta.abs() / 2.0).tan();
+            let t = (r * half).min(0.45 * l_in).min(0.45 * l_out);
+            let r_eff = t / half;
+            let a = p1 - (p1 - p0) * (t / l_in);
+            let b = p1 + (p2 - p1) * (t / l_out);
+            // the centre is to starboard of the way in for a turn to starboard
+            let n = Vector3::new(-t_in.y, t_in.x, 0.0) * theta.signum();
+            let centre = a + n * r_eff;
+            let k = (theta.abs() / 5f64.to_radians()).ceil().max(1.0) as usize;
+            for j in 0..=k {
+                let f = j as f64 / k as f64;
+                let (sn, cs) = (theta * f).sin_cos();
+                let v = a - centre;
+                let p = Vector3::new(
+                    centre.x + v.x * cs - v.y * sn,
+                    centre.y + v.x * sn + v.y * cs,
+                    a.z + (b.z - a.z) * f,
+                );
+                self.path.push(p);
+                self.wp_of.push(wp[i]);
+            }
+            let arc_from = self.on_arc.len();
+            self.on_arc.resize(self.path.len(), true);
+            // the arc's last point leads onto the straight leg
+            if let Some(last) = self
+                .on_arc
+                .last_mut()
+                .filter(|_| arc_from < self.path.len())
+            {
+                *last = false;
+            }
+        }
+        self.path.push(path[path.len() - 1]);
+        self.wp_of.push(wp[path.len() - 1]);
+        self.on_arc.push(false);
+        self.cum.clear();
+        self.cum.push(0.0);
+        for i in 1..self.path.len() {
+            let c = self.cum[i - 1] + (self.path[i] - self.path[i - 1]).norm();
+            self.cum.push(c);
+        }
     }
 
     /// Moves the first vertex to the start as now best estimated (horizontal only) and
@@ -563,7 +646,9 @@ impl LeaderPlanner {
             let len = self.cum[self.leg + 1] - self.cum[self.leg];
             let along = (pos - a).dot(&tg);
             let end = self.path[self.leg + 1];
-            let reached = (pos - end).norm() <= self.cfg.acceptance_radius_m || along >= len;
+            let on_arc = self.on_arc.get(self.leg + 1).copied().unwrap_or(false);
+            let reached =
+                (!on_arc && (pos - end).norm() <= self.cfg.acceptance_radius_m) || along >= len;
             if reached && self.leg + 1 < legs {
                 self.leg += 1;
             } else {

@@ -59,6 +59,7 @@ pub mod node;
 pub mod observer;
 pub mod shift;
 mod types;
+pub mod view;
 
 pub use follower::{
     FollowerConfig, FollowerInput, FollowerPlanner, ParentEstimate, PoseMeasurement,

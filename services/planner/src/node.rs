@@ -26,6 +26,11 @@ pub fn follower_config(scenario: &Scenario, name: &str) -> anyhow::Result<Follow
     if !scenario.follower.contains_key("memory_behind_m") {
         cfg.memory_behind_m = memory_behind_m(scenario, name, cfg.memory_behind_m);
     }
+    let camera: camera_pose::CameraConfig = scenario.section("camera")?;
+    let beacons: camera_pose::BeaconLayout = scenario.section("beacons")?;
+    cfg.view_half_angle_deg = camera.fov_deg / 2.0;
+    cfg.camera_mount_body_m = camera.mount_position_body_m;
+    cfg.parent_beacons_body_m = beacons.positions_body_m;
     cfg.d_a_m = spec
         .d_a_m
         .context("d_a_m not resolved: start the planner through `shoal run`")?;
@@ -50,6 +55,21 @@ pub fn memory_behind_m(scenario: &Scenario, name: &str, default: f64) -> f64 {
     } else {
         default
     }
+}
+
+/// The leader's turn radius that keeps every follower's parent in view
+/// ([`crate::view`]): from the slots, the camera's field of view and mount, and the
+/// beacon layout; 0 (sharp corners) without followers.
+pub fn turn_radius_m(scenario: &Scenario, speed_mps: f64) -> anyhow::Result<f64> {
+    let camera: camera_pose::CameraConfig = scenario.section("camera")?;
+    let beacons: camera_pose::BeaconLayout = scenario.section("beacons")?;
+    let margin = crate::view::view_margin_rad(
+        scenario.vehicles.iter().filter_map(|v| v.slot_m),
+        &beacons.positions_body_m,
+        camera.mount_position_body_m,
+        camera.fov_deg.to_radians() / 2.0,
+    );
+    Ok(margin.map_or(0.0, |m| crate::view::turn_radius_m(m, speed_mps)))
 }
 
 /// The one key of sim-plant's `[nav]` section the leader's position filter needs; absent →
@@ -92,6 +112,9 @@ impl<S: Service> PlannerTask<S> {
             cfg.d_min_m = scenario.safety.safe_distance_m;
             if !scenario.mission.contains_key("memory_behind_m") {
                 cfg.memory_behind_m = memory_behind_m(scenario, me, cfg.memory_behind_m);
+            }
+            if !scenario.mission.contains_key("turn_radius_m") {
+                cfg.turn_radius_m = turn_radius_m(scenario, cfg.speed_mps)?;
             }
             // The position filter's fix noise is the nav sensor's (sim-plant's `[nav]`).
             let nav: NavNoise = scenario.section("nav")?;

@@ -73,7 +73,18 @@ fn invalid(key: impl Into<String>, reason: impl Into<String>) -> ScenarioError {
 /// settings, with where from: a scenario that sets one is refused, so that
 /// nothing a user writes is silently replaced. (The service libraries keep
 /// them as parameters, for programs that build a config directly.)
-pub const DERIVED_KEYS: [(&str, &str, &str); 9] = [
+pub const DERIVED_KEYS: [(&str, &str, &str); 12] = [
+    ("follower", "view_half_angle_deg", "[camera] fov_deg / 2"),
+    (
+        "follower",
+        "camera_mount_body_m",
+        "[camera] mount_position_body_m",
+    ),
+    (
+        "follower",
+        "parent_beacons_body_m",
+        "[beacons] positions_body_m",
+    ),
     ("mpc", "step_s", "the mpc rate, 1 / [rates] mpc_hz"),
     (
         "mpc",
