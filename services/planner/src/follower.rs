@@ -130,6 +130,9 @@ pub struct FollowerConfig {
     /// The parent's beacons in its body frame, m (`shoal run` sets them from
     /// `[beacons] positions_body_m`; default the default layout).
     pub parent_beacons_body_m: Vec<[f64; 3]>,
+    /// Keep the target `d_min_m` clear of remembered returns on the follower's side
+    /// (default true; see `FollowerPlanner::keep_clear`).
+    pub keep_clear: bool,
 }
 
 impl Default for FollowerConfig {
@@ -159,6 +162,7 @@ impl Default for FollowerConfig {
             gate_chi2: 16.27,
             max_rejections: 3,
             view_margin_deg: 3.0,
+            keep_clear: true,
             view_half_angle_deg: 45.0,
             camera_mount_body_m: [1.4, 0.0, 0.0],
             parent_beacons_body_m: vec![
@@ -320,6 +324,10 @@ struct Anchor {
     /// turns its nose (and camera) toward it.
     look: Option<Vector3<f64>>,
 }
+
+/// How far past the target, along the parent's heading, remembered returns still keep it
+/// clear ([`FollowerConfig::keep_clear`]), m.
+pub const KEEP_CLEAR_AHEAD_M: f64 = 3.0;
 
 /// The follower planner (paper sec. 3 and fig. 4).
 ///
@@ -823,6 +831,43 @@ impl FollowerPlanner {
         y
     }
 
+    /// The target `pos` moved across the parent's heading (`yaw_parent`) until it keeps
+    /// `d_min_m` from every remembered return between the follower and a little past the
+    /// target along that heading, on the follower's own side of each return: a wall the
+    /// follower is alongside is never crossed, whichever way its parent moves (our
+    /// addition: eq. 8 shifts a follower toward its parent's track, which is no help when
+    /// the parent itself moves sideways, as between two gaps offset opposite ways). When
+    /// returns on both sides leave less than `2 d_min` the target goes midway.
+    fn keep_clear(&self, pos: Vector3<f64>, yaw_parent: f64) -> Vector3<f64> {
+        if !self.cfg.keep_clear {
+            return pos;
+        }
+        let d = self.cfg.d_min_m;
+        let own = to_level(yaw_parent, &(self.odo - pos));
+        let (x_lo, x_hi) = (own.x.min(0.0) - 1.0, own.x.max(0.0) + KEEP_CLEAR_AHEAD_M);
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for m in &self.memory {
+            let q = to_level(yaw_parent, &(m.pos - pos));
+            if q.x < x_lo || q.x > x_hi {
+                continue;
+            }
+            if own.y >= q.y {
+                lo = lo.max(q.y + d);
+            } else {
+                hi = hi.min(q.y - d);
+            }
+        }
+        let y = if lo <= hi {
+            0.0f64.clamp(lo, hi)
+        } else {
+            0.5 * (lo + hi)
+        };
+        if y == 0.0 {
+            return pos;
+        }
+        pos + from_level(yaw_parent, &Vector3::new(0.0, y, 0.0))
+    }
+
     /// Age of the last fused fix after which the parent is lost (stale, predicted, coasted), s.
     fn lost_after_s(&self) -> f64 {
         self.cfg.stale_after_s + self.cfg.predict_s + self.cfg.coast_s
@@ -882,7 +927,7 @@ impl FollowerPlanner {
         }
         self.slot.headway_mean = Some((mean_v, mean_r));
         let headway = (v_own - from_level(yaw_parent, &mean_v)) * self.cfg.headway_s;
-        let pos = p_parent + arm - headway;
+        let pos = self.keep_clear(p_parent + arm - headway, yaw_parent);
         let yaw = wrap(yaw_parent - self.cfg.yaw_headway_s * (r_own - mean_r));
         let yaw = self.keep_in_view(yaw, yaw_own, &p_parent, yaw_parent);
         self.last_target_odo = Some((pos, vel, yaw));

@@ -216,6 +216,9 @@ struct MemPoint {
     /// between the transducer and the point is clear, the obstacle lies
     /// beyond it.
     ray: Vector3<f64>,
+    /// The side of it the leader's track passed (+1: to starboard), fixed when the point
+    /// first came abeam; 0 while it is ahead.
+    side: f64,
 }
 
 /// The leader planner. See the [module docs](self) for the method.
@@ -307,7 +310,16 @@ impl LeaderPlanner {
             (along >= -behind && along <= self.cfg.lookahead_m).then(|| {
                 let e = (m.pos - a).dot(nrm);
                 let f = e + shadow * m.ray.dot(nrm);
-                (e.min(f), e.max(f))
+                let (lo, hi) = (e.min(f), e.max(f));
+                // what is abeam or behind can no longer be passed on its other side: it
+                // extends away from the side the track passed it on without end
+                if along > 0.0 || m.side == 0.0 {
+                    (lo, hi)
+                } else if m.side > 0.0 {
+                    (f64::NEG_INFINITY, hi)
+                } else {
+                    (lo, f64::INFINITY)
+                }
             })
         }));
         es.sort_unstable_by(|x, y| x.0.total_cmp(&y.0)); // in place, no allocation
@@ -601,13 +613,23 @@ impl LeaderPlanner {
                     .iter_mut()
                     .find(|m| (m.pos.xy() - p.xy()).norm() < cell)
                 {
-                    *m = MemPoint { t, pos: p, ray };
+                    *m = MemPoint {
+                        t,
+                        pos: p,
+                        ray,
+                        side: m.side,
+                    };
                     continue;
                 }
                 if self.memory.len() == LEADER_MEMORY_CAPACITY {
                     self.memory.remove(0);
                 }
-                self.memory.push(MemPoint { t, pos: p, ray });
+                self.memory.push(MemPoint {
+                    t,
+                    pos: p,
+                    ray,
+                    side: 0.0,
+                });
             }
         }
         let (behind, max_age) = (self.cfg.memory_behind_m, self.cfg.memory_max_age_s);
@@ -665,10 +687,17 @@ impl LeaderPlanner {
         // The window reaches `memory_behind_m` back, so the offset is kept until the
         // formation behind has passed; if nothing is clear of that whole window (a second
         // gap, offset the other way, close behind the first) only the leader's own
-        // `OWN_BEHIND_M` counts, rather than stopping with the way ahead open.
+        // `OWN_BEHIND_M` counts, and then only what is ahead, rather than stopping with the
+        // way ahead open.
+        for m in &mut self.memory {
+            if m.side == 0.0 && (m.pos - pos).dot(&tg) <= 0.0 {
+                let e = (m.pos - a).dot(&nrm);
+                m.side = if self.offset >= e { 1.0 } else { -1.0 };
+            }
+        }
         let mut es = std::mem::take(&mut self.window);
         let mut best: Option<f64> = None;
-        for reach in [behind, behind.min(OWN_BEHIND_M)] {
+        for reach in [behind, behind.min(OWN_BEHIND_M), 0.0] {
             best = self.wanted_offset(&mut es, &pos, &a, &tg, &nrm, reach, c);
             if best.is_some() {
                 break;

@@ -360,3 +360,37 @@ fn restarted_leader_carries_on_where_the_old_one_was() {
         }
     }
 }
+
+/// Two gaps 16 m apart, the first 2.6 m to port of the track, the second 4 m to
+/// starboard (a generated slalom course): the leader keeps its offset through the first
+/// while the first's walls are within `memory_behind_m`, then crosses to the second as soon
+/// as nothing ahead leaves the first offset clear; it never passes a wall it has come abeam
+/// of on the wall's far side, and never stops.
+#[test]
+fn leader_threads_two_gaps_offset_opposite_ways() {
+    let cfg = LeaderConfig {
+        waypoints_ned_m: vec![[183.0, 0.0, 10.0]],
+        memory_behind_m: 21.0,
+        ..LeaderConfig::default()
+    };
+    let b = |c: [f64; 3], h: [f64; 3]| Obstacle::Box {
+        center_ned_m: c,
+        half_extents_m: h,
+        yaw_deg: 0.0,
+    };
+    let obs = [
+        b([68.943, -13.125, 10.5], [9.122, 6.375, 10.5]),
+        b([68.943, 7.625, 10.5], [9.122, 6.375, 10.5]),
+        b([104.246, -7.483, 10.5], [10.394, 6.517, 10.5]),
+        b([104.246, 13.552, 10.5], [10.394, 6.517, 10.5]),
+    ];
+    let mut l = Leader::new(&cfg, &obs);
+    let mut min_clear = f64::INFINITY;
+    while l.pos.x < 130.0 && l.t < 300.0 {
+        let out = l.step();
+        min_clear = min_clear.min(l.clearance());
+        assert_ne!(out.state.mode, Mode::Blocked, "blocked at x {}", l.pos.x);
+    }
+    assert!(l.pos.x >= 130.0, "stuck at x {}", l.pos.x);
+    assert!(min_clear >= cfg.d_min_m, "min clearance {min_clear}");
+}
