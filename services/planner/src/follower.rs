@@ -14,6 +14,8 @@ use crate::types::{
 
 /// Remembered obstacle points (odometry frame).
 pub const MEMORY_CAPACITY: usize = 128;
+/// Returns closer than this to a remembered one refresh it instead of adding a point, m.
+pub const MEMORY_CELL_M: f64 = 0.5;
 /// Own-pose history kept to place late vision fixes.
 const HISTORY_CAPACITY: usize = 64;
 /// ParentLost: the follower turns toward the parent's last known position only if that is
@@ -133,6 +135,12 @@ pub struct FollowerConfig {
     /// Keep the target `d_min_m` clear of remembered returns on the follower's side
     /// (default true; see `FollowerPlanner::keep_clear`).
     pub keep_clear: bool,
+    /// Room for tracking error `keep_clear` leaves beyond `d_min_m`, m (default 0.25).
+    pub keep_clear_margin_m: f64,
+    /// After losing its parent, a follower heads for the slot behind where the parent is
+    /// predicted to be (its last velocity carried on) for this long before it holds, s
+    /// (default 10; 0: hold at once, facing the parent's last known position).
+    pub search_s: f64,
 }
 
 impl Default for FollowerConfig {
@@ -163,6 +171,8 @@ impl Default for FollowerConfig {
             max_rejections: 3,
             view_margin_deg: 3.0,
             keep_clear: true,
+            keep_clear_margin_m: 0.25,
+            search_s: 10.0,
             view_half_angle_deg: 45.0,
             camera_mount_body_m: [1.4, 0.0, 0.0],
             parent_beacons_body_m: vec![
@@ -213,6 +223,8 @@ impl FollowerConfig {
         check_pos("follower.headway_avg_s", self.headway_avg_s)?;
         check_nonneg("follower.yaw_headway_s", self.yaw_headway_s)?;
         check_nonneg("follower.view_margin_deg", self.view_margin_deg)?;
+        check_nonneg("follower.keep_clear_margin_m", self.keep_clear_margin_m)?;
+        check_nonneg("follower.search_s", self.search_s)?;
         check_pos("follower.view_half_angle_deg", self.view_half_angle_deg)?;
         if self.reacquire_count == 0 {
             return Err(cfg_err(
@@ -615,6 +627,16 @@ impl FollowerPlanner {
                         continue;
                     }
                 }
+                // one point per cell: the wall abeam is still known when the beams have
+                // been hitting the wall ahead for longer than the capacity lasts
+                if let Some(m) = self
+                    .memory
+                    .iter_mut()
+                    .find(|m| (m.pos.xy() - p.xy()).norm() < MEMORY_CELL_M)
+                {
+                    *m = MemPoint { t, pos: p };
+                    continue;
+                }
                 if self.memory.len() == MEMORY_CAPACITY {
                     self.memory.remove(0);
                 }
@@ -748,7 +770,23 @@ impl FollowerPlanner {
                     .map(|l| l - self.odo)
                     .filter(|d| d.xy().norm() > LOOK_MIN_RANGE_M)
                     .map_or(anchor.yaw, |d| d.y.atan2(d.x));
-                (anchor.pos, Vector3::zeros(), yaw, Mode::ParentLost)
+                if self.observer.initialized() && t - anchor.t0 < self.cfg.search_s {
+                    // Search: for `search_s`, go to the slot behind where the parent is
+                    // predicted to be (the observer carries it on at its last velocity),
+                    // facing it, so that a parent that moved on out of sight is found
+                    // again instead of left behind for good.
+                    let p = self.observer.position();
+                    let yaw_p = self.observer.yaw();
+                    let v = self.observer.velocity();
+                    let slot = from_level(yaw_p, &self.slot.disp.slot);
+                    let (pos, vel) = self.keep_clear(p + slot, Vector3::new(v.x, v.y, 0.0), yaw_p);
+                    let yaw = Some(p - self.odo)
+                        .filter(|d| d.xy().norm() > LOOK_MIN_RANGE_M)
+                        .map_or(yaw, |d| d.y.atan2(d.x));
+                    (pos, vel, yaw, Mode::ParentLost)
+                } else {
+                    (anchor.pos, Vector3::zeros(), yaw, Mode::ParentLost)
+                }
             }
         };
         self.mode = mode;
@@ -832,17 +870,24 @@ impl FollowerPlanner {
     }
 
     /// The target `pos` moved across the parent's heading (`yaw_parent`) until it keeps
-    /// `d_min_m` from every remembered return between the follower and a little past the
+    /// `d_min_m + keep_clear_margin_m` from every remembered return between the
+    /// follower and a little past the
     /// target along that heading, on the follower's own side of each return: a wall the
     /// follower is alongside is never crossed, whichever way its parent moves (our
     /// addition: eq. 8 shifts a follower toward its parent's track, which is no help when
     /// the parent itself moves sideways, as between two gaps offset opposite ways). When
-    /// returns on both sides leave less than `2 d_min` the target goes midway.
-    fn keep_clear(&self, pos: Vector3<f64>, yaw_parent: f64) -> Vector3<f64> {
+    /// returns on both sides leave less than `2 d_min` the target goes midway. A target held
+    /// off a wall loses its velocity toward it.
+    fn keep_clear(
+        &self,
+        pos: Vector3<f64>,
+        vel: Vector3<f64>,
+        yaw_parent: f64,
+    ) -> (Vector3<f64>, Vector3<f64>) {
         if !self.cfg.keep_clear {
-            return pos;
+            return (pos, vel);
         }
-        let d = self.cfg.d_min_m;
+        let d = self.cfg.d_min_m + self.cfg.keep_clear_margin_m;
         let own = to_level(yaw_parent, &(self.odo - pos));
         let (x_lo, x_hi) = (own.x.min(0.0) - 1.0, own.x.max(0.0) + KEEP_CLEAR_AHEAD_M);
         let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
@@ -863,9 +908,18 @@ impl FollowerPlanner {
             0.5 * (lo + hi)
         };
         if y == 0.0 {
-            return pos;
+            return (pos, vel);
         }
-        pos + from_level(yaw_parent, &Vector3::new(0.0, y, 0.0))
+        // held off a wall: no velocity toward it either (the parent's sideways motion
+        // would otherwise still carry the follower in)
+        let mut v = to_level(yaw_parent, &vel);
+        if v.y * y < 0.0 {
+            v.y = 0.0;
+        }
+        (
+            pos + from_level(yaw_parent, &Vector3::new(0.0, y, 0.0)),
+            from_level(yaw_parent, &v),
+        )
     }
 
     /// Age of the last fused fix after which the parent is lost (stale, predicted, coasted), s.
@@ -927,7 +981,7 @@ impl FollowerPlanner {
         }
         self.slot.headway_mean = Some((mean_v, mean_r));
         let headway = (v_own - from_level(yaw_parent, &mean_v)) * self.cfg.headway_s;
-        let pos = self.keep_clear(p_parent + arm - headway, yaw_parent);
+        let (pos, vel) = self.keep_clear(p_parent + arm - headway, vel, yaw_parent);
         let yaw = wrap(yaw_parent - self.cfg.yaw_headway_s * (r_own - mean_r));
         let yaw = self.keep_in_view(yaw, yaw_own, &p_parent, yaw_parent);
         self.last_target_odo = Some((pos, vel, yaw));
@@ -1036,6 +1090,7 @@ mod tests {
     fn after_predicting_the_follower_slows_to_a_stop_then_is_lost() {
         let cfg = FollowerConfig {
             predict_s: 2.0,
+            search_s: 3.0,
             ..FollowerConfig::default()
         };
         let mut w = World::new(&cfg);
@@ -1066,7 +1121,14 @@ mod tests {
                     "age {age}: {v} m/s while predicting"
                 );
             } else if age > slow_from + cfg.coast_s + 1e-9 {
-                assert!(v.abs() < 1e-9, "age {age}: {v} m/s when lost");
+                // lost: searching after the parent at its predicted speed, then held (the
+                // steps at either end of the search aside)
+                let since = age - slow_from - cfg.coast_s;
+                if since > cfg.search_s + 2.0 * DT {
+                    assert!(v.abs() < 1e-9, "age {age}: {v} m/s when lost");
+                } else if since > 2.0 * DT && since < cfg.search_s - DT {
+                    assert!((v - 1.0).abs() < 0.05, "age {age}: {v} m/s searching");
+                }
             } else {
                 // slowing linearly over coast_s
                 let f = 1.0 - (age - slow_from - DT) / cfg.coast_s;

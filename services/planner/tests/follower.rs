@@ -257,7 +257,11 @@ fn wall_to_port_shifts_the_port_slot_and_back() {
 
 #[test]
 fn lost_parent_coasts_then_holds_then_reacquires() {
-    let cfg = FollowerConfig::default();
+    // without the search (`search_s = 0`): hold where the coast ended
+    let cfg = FollowerConfig {
+        search_s: 0.0,
+        ..FollowerConfig::default()
+    };
     let mut w = World::new(&cfg);
     for _ in 0..100 {
         let fix = w.fix(w.t, Vector3::zeros());
