@@ -389,3 +389,131 @@ pub fn run(o: &CampaignOptions) -> anyhow::Result<Report> {
     write_report(&report, &o.out)?;
     Ok(report)
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+    use crate::analysis::summary::Stretch;
+
+    fn options(courses: usize, seeds: u64, families: Vec<Family>) -> CampaignOptions {
+        CampaignOptions {
+            shape: Shape::Paper,
+            vehicles: 5,
+            spacing_m: 4.0,
+            families,
+            courses,
+            seeds,
+            jobs: 1,
+            out: PathBuf::from("unused"),
+            shoal: PathBuf::from("shoal"),
+            bin_dir: None,
+            keep_recordings: false,
+            quiet: true,
+        }
+    }
+
+    /// A summary every criterion passes.
+    fn good() -> Summary {
+        let mut s = Summary::default();
+        s.safety.safe_distance_m = 2.0;
+        s.safety.min_pair_distance_m = Some(3.5);
+        s.safety.min_obstacle_clearance_m = Some(1.9);
+        s.formation.slot_error_rms_final_m = Some(0.2);
+        s.mission.leader_goal_error_m = Some(0.1);
+        s.perception.longest_parent_gap_s.insert("F1".into(), 0.1);
+        s
+    }
+
+    #[test]
+    fn courses_go_round_the_families_and_every_seed_runs_each() {
+        let o = options(7, 2, vec![Family::Gate, Family::Turn, Family::Slalom]);
+        let j = jobs(&o).unwrap();
+        assert_eq!(j.len(), 14);
+        let names: Vec<&str> = j.iter().map(|j| j.name.as_str()).collect();
+        assert_eq!(
+            &names[..6],
+            [
+                "gate0-paper-5-s0",
+                "gate0-paper-5-s1",
+                "turn0-paper-5-s0",
+                "turn0-paper-5-s1",
+                "slalom0-paper-5-s0",
+                "slalom0-paper-5-s1"
+            ]
+        );
+        assert_eq!(j[6].name, "gate1-paper-5-s0");
+        assert_eq!(j[12].name, "gate2-paper-5-s0");
+        assert!(matches!(
+            jobs(&options(0, 1, vec![Family::Gate])),
+            Err(CampaignError::NoCourses)
+        ));
+        assert!(matches!(
+            jobs(&options(1, 0, vec![Family::Gate])),
+            Err(CampaignError::NoSeeds)
+        ));
+        assert!(matches!(
+            jobs(&options(1, 1, vec![])),
+            Err(CampaignError::NoFamilies)
+        ));
+    }
+
+    #[test]
+    fn a_run_passes_only_when_every_criterion_does() {
+        assert!(judge(&good()).is_empty());
+        let mut s = good();
+        s.formation.slot_error_rms_final_m = Some(0.6);
+        let f = judge(&s);
+        assert_eq!(f.len(), 1);
+        assert!(f[0].contains("0.60 m over the last 30 s"), "{f:?}");
+        let mut s = good();
+        s.mission.leader_goal_error_m = Some(1.5);
+        assert!(judge(&s)[0].contains("1.50 m from its goal"));
+        let mut s = good();
+        s.mission.leader_goal_error_m = None;
+        s.formation.slot_error_rms_final_m = None;
+        assert_eq!(judge(&s).len(), 2, "a missing figure fails, never passes");
+        let mut s = good();
+        s.verdict.failed = vec!["F1 in contact with an obstacle".into()];
+        assert_eq!(
+            judge(&s),
+            vec!["F1 in contact with an obstacle".to_string()]
+        );
+    }
+
+    #[test]
+    fn the_report_tallies_per_family_and_lists_the_failures_with_their_paths() {
+        let o = options(2, 2, vec![Family::Gate, Family::Offset]);
+        let j = jobs(&o).unwrap();
+        let mut rows: Vec<RunRow> = j
+            .iter()
+            .map(|j| row(j, &PathBuf::from(format!("/c/runs/{}", j.name)), &good()))
+            .collect();
+        let mut bad = good();
+        bad.safety.min_obstacle_clearance_m = Some(0.4);
+        bad.verdict.failed = vec!["obstacle clearance 0.40 m below half the safe distance".into()];
+        bad.perception.parent_lost = vec![Stretch::default()];
+        rows[3] = row(&j[3], &PathBuf::from("/c/runs/offset0-paper-5-s1"), &bad);
+        rows[1].status = Status::Interrupted;
+        let r = Report::new(&o, rows);
+        assert_eq!(r.overall.runs, 3);
+        assert_eq!(r.overall.passed, 2);
+        assert_eq!(r.interrupted, 1);
+        let gate = &r.by_family[0];
+        assert_eq!((gate.runs, gate.passed, gate.pass_rate), (1, 1, Some(1.0)));
+        let offset = &r.by_family[1];
+        assert_eq!((offset.runs, offset.passed), (2, 1));
+        assert_eq!(offset.worst_clearance_m, Some(0.4));
+        let md = r.markdown();
+        assert!(md.contains("| offset | 2 | 1 | 50.0 % |"), "{md}");
+        assert!(md.contains("| all | 3 | 2 | 66.7 % |"), "{md}");
+        assert!(
+            md.contains("- `/c/runs/offset0-paper-5-s1`: obstacle clearance 0.40 m"),
+            "{md}"
+        );
+        assert!(md.contains("1 run(s) interrupted"));
+        let back: Report = serde_json::from_str(&serde_json::to_string(&r).unwrap()).unwrap();
+        assert_eq!(back, r);
+    }
+}

@@ -299,3 +299,175 @@ proptest! {
         prop_assert_eq!(generate(&o).unwrap(), generate(&o).unwrap());
     }
 }
+
+/// The leader's route from a scenario: start, then the waypoints.
+fn route_of(s: &Scenario) -> Vec<[f64; 3]> {
+    let mission: planner::LeaderConfig = s.section("mission").unwrap();
+    let mut out = vec![s.start_poses()[&s.leader().name].0];
+    out.extend(mission.waypoints_ned_m);
+    out
+}
+
+/// Distance from `p` to the polyline `route` (horizontal).
+fn off_route(route: &[[f64; 3]], p: [f64; 3]) -> f64 {
+    route
+        .windows(2)
+        .map(|w| {
+            let (a, b) = (w[0], w[1]);
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let l2 = (dx * dx + dy * dy).max(1e-12);
+            let f = (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / l2).clamp(0.0, 1.0);
+            ((a[0] + f * dx - p[0]).powi(2) + (a[1] + f * dy - p[1]).powi(2)).sqrt()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// A course of every family, for the paper's five and for two 4-deep
+/// branches, over several course seeds: `shoal check` accepts it (every
+/// start clear of the obstacles, parents in view, D_a/D_b kept), the route
+/// never runs through an obstacle within a gap's half-width, the goal is past
+/// the last feature by the group's length and more, and the same options
+/// give the same file.
+#[test]
+fn every_course_family_is_checked_and_passable() {
+    for (shape, n) in [(Shape::Paper, 5), (Shape::V, 9)] {
+        for family in Family::ALL {
+            for course_seed in 0..4 {
+                let o = GenOptions {
+                    course: Some(family),
+                    course_seed: Some(course_seed),
+                    ..opts(shape, n, 1, 4.0)
+                };
+                let s = verify(&o);
+                let p = plan(&o).unwrap();
+                let c = p.course.as_ref().unwrap();
+                assert_eq!(c.family, family);
+                let field =
+                    sonar::ObstacleField::new(&s.obstacles_as::<sonar::Obstacle>().unwrap())
+                        .unwrap();
+                // the route (the leader's nominal track) runs through the gaps of the
+                // families whose gaps are centred on it (the others the leader must find)
+                let centred = matches!(
+                    family,
+                    Family::Gate
+                        | Family::Turn
+                        | Family::SBend
+                        | Family::Angled
+                        | Family::Depth
+                        | Family::Current
+                );
+                let route = route_of(&s);
+                let steps = (c.length_m / 0.5) as usize;
+                let mut along = 0.0;
+                for w in route.windows(2) {
+                    let (a, b) = (w[0], w[1]);
+                    let l = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+                    let k = (l / 0.5).ceil() as usize;
+                    for i in 0..=k {
+                        let f = i as f64 / k as f64;
+                        let q = [
+                            a[0] + f * (b[0] - a[0]),
+                            a[1] + f * (b[1] - a[1]),
+                            a[2] + f * (b[2] - a[2]),
+                        ];
+                        let d = field.distance(&nalgebra::Point3::from(q));
+                        if centred {
+                            assert!(d > 0.0, "{family} {course_seed}: route inside an obstacle");
+                        }
+                    }
+                    along += l;
+                }
+                assert!(
+                    steps > 0 && (along - c.length_m).abs() < 1.0,
+                    "{along} vs {}",
+                    c.length_m
+                );
+                let settle = c.length_m - c.end_m;
+                assert!(
+                    settle >= p.memory_behind_m + 40.0,
+                    "{family}: {settle} m to settle"
+                );
+                assert!(
+                    s.duration_s >= c.length_m / SPEED_MPS + 40.0,
+                    "{family}: {} s for {} m",
+                    s.duration_s,
+                    c.length_m
+                );
+                // a gap is as wide as the plan's gate, and every solid is near the route
+                for o in s.obstacles_as::<sonar::Obstacle>().unwrap() {
+                    let centre = match o {
+                        sonar::Obstacle::Box { center_ned_m, .. }
+                        | sonar::Obstacle::Cylinder { center_ned_m, .. } => center_ned_m,
+                        other => panic!("{family}: unexpected {}", other.kind()),
+                    };
+                    assert!(
+                        off_route(&route, centre) < 60.0,
+                        "{family}: a solid far off the route"
+                    );
+                }
+                assert_eq!(generate(&o).unwrap(), generate(&o).unwrap());
+            }
+        }
+    }
+}
+
+#[test]
+fn families_draw_what_they_say() {
+    let course = |family: Family, seed: u64| {
+        let o = GenOptions {
+            course: Some(family),
+            course_seed: Some(seed),
+            ..opts(Shape::Paper, 5, 0, 4.0)
+        };
+        plan(&o).unwrap().course.unwrap()
+    };
+    for seed in 0..8 {
+        let t = course(Family::Turn, seed);
+        assert_eq!(t.turns_deg.len(), 1);
+        assert!(
+            (30.0..=90.0).contains(&t.turns_deg[0].abs()),
+            "{:?}",
+            t.turns_deg
+        );
+        assert!(t.gates >= 1);
+        let b = course(Family::SBend, seed);
+        assert_eq!(b.turns_deg.len(), 2);
+        assert!(
+            (b.turns_deg[0] + b.turns_deg[1]).abs() < 1e-9,
+            "an S-bend turns back"
+        );
+        let sl = course(Family::Slalom, seed);
+        assert!((2..=3).contains(&sl.gates));
+        let cur = course(Family::Current, seed).current_ned_mps.unwrap();
+        assert!(cur[0] == 0.0 && (0.1..=0.3).contains(&cur[1].abs()));
+        let d = course(Family::Depth, seed);
+        let depths: Vec<f64> = d.waypoints.iter().map(|w| w[2]).collect();
+        let change = depths.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+            - depths.iter().copied().fold(f64::INFINITY, f64::min);
+        assert!(
+            (3.0..=8.0 + 1e-9).contains(&change),
+            "depth change {change}"
+        );
+        for f in [
+            Family::Gate,
+            Family::Offset,
+            Family::Asymmetric,
+            Family::Angled,
+        ] {
+            let c = course(f, seed);
+            assert!(c.turns_deg.is_empty() && c.current_ned_mps.is_none());
+            assert_eq!(c.waypoints.len(), 1, "{f}: straight to the goal");
+        }
+    }
+    // the paper's five: the paper's 8 m passage
+    let g = plan(&GenOptions {
+        course: Some(Family::Gate),
+        ..opts(Shape::Paper, 5, 0, 4.0)
+    })
+    .unwrap();
+    assert_eq!(g.half_gap_m, 4.0);
+    assert_eq!(
+        plan(&opts(Shape::Paper, 6, 0, 4.0)).unwrap_err(),
+        GenError::PaperSize(6)
+    );
+}
