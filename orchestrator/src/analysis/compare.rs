@@ -1,7 +1,10 @@
 //! `shoal compare`'s variants and table: the two comparisons the paper argues but does not
 //! measure, run side by side with the method on the same scenario and seed.
 //!
-//! - **method**: the scenario as given (camera + PnP, vertical shift on).
+//! - **method**: the scenario as given (camera + PnP, vertical shift on, the
+//!   method as generalised beyond the paper for any course).
+//! - **published**: the paper's method as published (`[method] generalised =
+//!   false`: none of the generalisations of `services/planner/README.md`).
 //! - **acoustic**: followers get the parent's pose over a simulated acoustic
 //!   modem instead of the camera (`[acoustic]`: delay range/1500 m/s,
 //!   80 bit/s → one update every 3.2 s, 10% loss). The followers' staleness
@@ -34,8 +37,11 @@ pub fn variants(base: &Scenario) -> anyhow::Result<Vec<(&'static str, Scenario)>
     }
     let mut ablation = base.clone();
     ablation.method.vertical_shift = false;
+    let mut published = base.clone();
+    published.method.generalised = false;
     Ok(vec![
         ("method", method),
+        ("published", published),
         ("acoustic", acoustic),
         ("no_vertical_shift", ablation),
     ])
@@ -44,7 +50,7 @@ pub fn variants(base: &Scenario) -> anyhow::Result<Vec<(&'static str, Scenario)>
 /// One row of the comparison table.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Row {
-    /// `method`, `acoustic` or `no_vertical_shift`.
+    /// `method`, `published`, `acoustic` or `no_vertical_shift`.
     pub variant: String,
     /// RMS slot error before the passage, m.
     pub slot_error_rms_before_m: Option<f64>,

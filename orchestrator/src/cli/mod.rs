@@ -41,8 +41,9 @@ enum Cmd {
         /// Scenario TOML (default: the embedded paper scenario).
         scenario: Option<PathBuf>,
     },
-    /// Run the method, the acoustic-modem baseline and the no-vertical-shift
-    /// ablation side by side; write DIR/compare.md and DIR/compare.json.
+    /// Run the method, the paper's method as published, the acoustic-modem
+    /// baseline and the no-vertical-shift ablation side by side; write
+    /// DIR/compare.md and DIR/compare.json.
     Compare(compare::CompareCmd),
     /// List a recording's channels, schemas, counts, rates, time span, gaps.
     Inspect {

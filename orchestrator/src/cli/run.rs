@@ -118,10 +118,11 @@ fn print_table(s: &Summary) {
     );
     let rms = &s.formation.slot_error_rms_m;
     eprintln!(
-        "  slot error rms   before {} m, during {} m, after {} m",
+        "  slot error rms   before {} m, during {} m, after {} m; last 30 s {} m",
         na(rms.before, 2),
         na(rms.during, 2),
-        na(rms.after, 2)
+        na(rms.after, 2),
+        na(s.formation.slot_error_rms_final_m, 2)
     );
     eprintln!(
         "  recording        {} messages, {} dropped",

@@ -82,7 +82,7 @@ impl VariantSeries {
 
 /// Title of the comparison figure.
 pub(crate) const COMPARE_TITLE: &str =
-    "Method vs acoustic baseline vs no vertical shift: slot error, minimum distance, parent fix rate";
+    "Method vs as published vs acoustic baseline vs no vertical shift: slot error, minimum distance, parent fix rate";
 
 /// Writes `compare.png` and `compare.svg` into `dir`: three panels over time
 /// (RMS slot error over followers, minimum pairwise distance against the safe

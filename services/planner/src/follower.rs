@@ -14,8 +14,6 @@ use crate::types::{
 
 /// Remembered obstacle points (odometry frame).
 pub const MEMORY_CAPACITY: usize = 128;
-/// Returns closer than this to a remembered one refresh it instead of adding a point, m.
-pub const MEMORY_CELL_M: f64 = 0.5;
 /// Own-pose history kept to place late vision fixes.
 const HISTORY_CAPACITY: usize = 64;
 /// ParentLost: the follower turns toward the parent's last known position only if that is
@@ -141,6 +139,9 @@ pub struct FollowerConfig {
     /// predicted to be (its last velocity carried on) for this long before it holds, s
     /// (default 10; 0: hold at once, facing the parent's last known position).
     pub search_s: f64,
+    /// Returns closer than this to a remembered one refresh it instead of adding a point,
+    /// m (default 0.5; 0: every return is a point, oldest dropped when full).
+    pub memory_cell_m: f64,
 }
 
 impl Default for FollowerConfig {
@@ -173,6 +174,7 @@ impl Default for FollowerConfig {
             keep_clear: true,
             keep_clear_margin_m: 0.25,
             search_s: 10.0,
+            memory_cell_m: 0.5,
             view_half_angle_deg: 45.0,
             camera_mount_body_m: [1.4, 0.0, 0.0],
             parent_beacons_body_m: vec![
@@ -225,6 +227,7 @@ impl FollowerConfig {
         check_nonneg("follower.view_margin_deg", self.view_margin_deg)?;
         check_nonneg("follower.keep_clear_margin_m", self.keep_clear_margin_m)?;
         check_nonneg("follower.search_s", self.search_s)?;
+        check_nonneg("follower.memory_cell_m", self.memory_cell_m)?;
         check_pos("follower.view_half_angle_deg", self.view_half_angle_deg)?;
         if self.reacquire_count == 0 {
             return Err(cfg_err(
@@ -632,7 +635,7 @@ impl FollowerPlanner {
                 if let Some(m) = self
                     .memory
                     .iter_mut()
-                    .find(|m| (m.pos.xy() - p.xy()).norm() < MEMORY_CELL_M)
+                    .find(|m| (m.pos.xy() - p.xy()).norm() < self.cfg.memory_cell_m)
                 {
                     *m = MemPoint { t, pos: p };
                     continue;

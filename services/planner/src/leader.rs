@@ -91,11 +91,14 @@ pub struct LeaderConfig {
     /// not known, and a wall seen from inside a gap must not be passed on its far side.
     pub shadow_m: f64,
     /// Returns closer than this to a remembered one refresh it instead of adding a point,
-    /// m (default 0.5).
+    /// m (default 0.5; 0: every return is a point, oldest dropped when full).
     pub memory_cell_m: f64,
     /// An offset on the other side of the track than the current one must be shorter by
     /// this much to be chosen, m (default 1).
     pub side_margin_m: f64,
+    /// A return that came abeam keeps the side the track passed it on (default true;
+    /// `false`: every return may be passed on either side, as the paper's ref. [11]).
+    pub keep_abeam_side: bool,
     /// Line-of-sight lookahead for the heading, m (default 5).
     pub los_lookahead_m: f64,
     /// The virtual target is at most this far ahead of the leader's projection, m (default 2).
@@ -131,6 +134,7 @@ impl Default for LeaderConfig {
             shadow_m: 5.0,
             memory_cell_m: 0.5,
             side_margin_m: 1.0,
+            keep_abeam_side: true,
             los_lookahead_m: 5.0,
             max_lead_m: 2.0,
             decel_mps2: 0.05,
@@ -170,7 +174,7 @@ impl LeaderConfig {
         check_pos("mission.offset_rate_mps", self.offset_rate_mps)?;
         check_nonneg("mission.shadow_m", self.shadow_m)?;
         check_nonneg("mission.turn_radius_m", self.turn_radius_m)?;
-        check_pos("mission.memory_cell_m", self.memory_cell_m)?;
+        check_nonneg("mission.memory_cell_m", self.memory_cell_m)?;
         check_nonneg("mission.side_margin_m", self.side_margin_m)?;
         check_pos("mission.los_lookahead_m", self.los_lookahead_m)?;
         check_pos("mission.max_lead_m", self.max_lead_m)?;
@@ -313,7 +317,7 @@ impl LeaderPlanner {
                 let (lo, hi) = (e.min(f), e.max(f));
                 // what is abeam or behind can no longer be passed on its other side: it
                 // extends away from the side the track passed it on without end
-                if along > 0.0 || m.side == 0.0 {
+                if along > 0.0 || m.side == 0.0 || !self.cfg.keep_abeam_side {
                     (lo, hi)
                 } else if m.side > 0.0 {
                     (f64::NEG_INFINITY, hi)

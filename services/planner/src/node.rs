@@ -23,14 +23,22 @@ pub fn follower_config(scenario: &Scenario, name: &str) -> anyhow::Result<Follow
     let spec = scenario.vehicle(name).context("vehicle not in scenario")?;
     cfg.slot_in_parent_m = spec.slot_m.context("a follower needs slot_m")?;
     cfg.d_min_m = scenario.safety.safe_distance_m;
-    if !scenario.follower.contains_key("memory_behind_m") {
-        cfg.memory_behind_m = memory_behind_m(scenario, name, cfg.memory_behind_m);
-    }
     let camera: camera_pose::CameraConfig = scenario.section("camera")?;
     let beacons: camera_pose::BeaconLayout = scenario.section("beacons")?;
     cfg.view_half_angle_deg = camera.fov_deg / 2.0;
     cfg.camera_mount_body_m = camera.mount_position_body_m;
     cfg.parent_beacons_body_m = beacons.positions_body_m;
+    if scenario.method.generalised {
+        if !scenario.follower.contains_key("memory_behind_m") {
+            cfg.memory_behind_m = memory_behind_m(scenario, name, cfg.memory_behind_m);
+        }
+    } else {
+        // the paper's method as published
+        cfg.view_margin_deg = 0.0;
+        cfg.keep_clear = false;
+        cfg.search_s = 0.0;
+        cfg.memory_cell_m = 0.0;
+    }
     cfg.d_a_m = spec
         .d_a_m
         .context("d_a_m not resolved: start the planner through `shoal run`")?;
@@ -110,11 +118,20 @@ impl<S: Service> PlannerTask<S> {
         let role = if spec.parent.is_none() {
             let mut cfg: LeaderConfig = scenario.section("mission")?;
             cfg.d_min_m = scenario.safety.safe_distance_m;
-            if !scenario.mission.contains_key("memory_behind_m") {
-                cfg.memory_behind_m = memory_behind_m(scenario, me, cfg.memory_behind_m);
-            }
-            if !scenario.mission.contains_key("turn_radius_m") {
-                cfg.turn_radius_m = turn_radius_m(scenario, cfg.speed_mps)?;
+            if scenario.method.generalised {
+                if !scenario.mission.contains_key("memory_behind_m") {
+                    cfg.memory_behind_m = memory_behind_m(scenario, me, cfg.memory_behind_m);
+                }
+                if !scenario.mission.contains_key("turn_radius_m") {
+                    cfg.turn_radius_m = turn_radius_m(scenario, cfg.speed_mps)?;
+                }
+            } else {
+                // the paper's method as published (its ref. [11] for the leader)
+                cfg.shadow_m = 0.0;
+                cfg.side_margin_m = 0.0;
+                cfg.keep_abeam_side = false;
+                cfg.memory_cell_m = 0.0;
+                cfg.turn_radius_m = 0.0;
             }
             // The position filter's fix noise is the nav sensor's (sim-plant's `[nav]`).
             let nav: NavNoise = scenario.section("nav")?;

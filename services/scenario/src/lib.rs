@@ -224,6 +224,12 @@ pub struct Method {
     /// true). `false` is the ablation D_b = 0: followers in line hide beacons
     /// from the ones behind.
     pub vertical_shift: bool,
+    /// The method as generalised beyond the paper (default true): the
+    /// leader's shadows, sides, formation window and turn arcs, the
+    /// followers' view keeping, keep-clear and search, both planners'
+    /// memory cells (`services/planner/README.md`). `false` is the paper's
+    /// method as published, for `shoal compare`.
+    pub generalised: bool,
 }
 
 impl Default for Method {
@@ -231,6 +237,7 @@ impl Default for Method {
         Self {
             perception: Perception::Camera,
             vertical_shift: true,
+            generalised: true,
         }
     }
 }
