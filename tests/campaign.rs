@@ -90,14 +90,12 @@ fn one_course_of_every_family_passes_and_the_report_says_so() {
         .contains("<svg"));
 
     // the same command again resumes: every run is kept, none is run again
-    let before = std::fs::metadata(
-        out.join("runs")
-            .join(runs[0]["name"].as_str().unwrap())
-            .join("summary.json"),
-    )
-    .unwrap()
-    .modified()
-    .unwrap();
+    let first = out
+        .join("runs")
+        .join(runs[0]["name"].as_str().unwrap())
+        .join("summary.json");
+    let written = || std::fs::metadata(&first).unwrap().modified().unwrap();
+    let before = written();
     let t0 = Instant::now();
     let o = run_shoal(&args);
     assert!(o.status.success());
@@ -105,15 +103,7 @@ fn one_course_of_every_family_passes_and_the_report_says_so() {
         t0.elapsed() < Duration::from_secs(30),
         "resumed, not re-run"
     );
-    let after = std::fs::metadata(
-        out.join("runs")
-            .join(runs[0]["name"].as_str().unwrap())
-            .join("summary.json"),
-    )
-    .unwrap()
-    .modified()
-    .unwrap();
-    assert_eq!(before, after);
+    assert_eq!(before, written());
 }
 
 #[test]

@@ -192,18 +192,12 @@ pub fn judge(s: &Summary) -> Vec<String> {
 /// The row of a finished run from its summary.
 pub fn row(job: &Job, dir: &Path, s: &Summary) -> RunRow {
     let failed = judge(s);
+    let status = if failed.is_empty() {
+        Status::Pass
+    } else {
+        Status::Fail
+    };
     RunRow {
-        name: job.name.clone(),
-        family: job.family.name().to_string(),
-        course_seed: job.course_seed,
-        seed: job.seed,
-        dir: dir.display().to_string(),
-        status: if failed.is_empty() {
-            Status::Pass
-        } else {
-            Status::Fail
-        },
-        failed,
         min_pair_m: s.safety.min_pair_distance_m,
         clearance_m: s.safety.min_obstacle_clearance_m,
         parent_gap_s: s
@@ -215,10 +209,12 @@ pub fn row(job: &Job, dir: &Path, s: &Summary) -> RunRow {
         final_rms_m: s.formation.slot_error_rms_final_m,
         goal_error_m: s.mission.leader_goal_error_m,
         wall_s: s.wall_time_s,
+        ..unfinished(job, dir, status, failed)
     }
 }
 
-fn unfinished(job: &Job, dir: &Path, status: Status, why: String) -> RunRow {
+/// The row of a run without figures (interrupted, or failed to run).
+fn unfinished(job: &Job, dir: &Path, status: Status, failed: Vec<String>) -> RunRow {
     RunRow {
         name: job.name.clone(),
         family: job.family.name().to_string(),
@@ -226,7 +222,7 @@ fn unfinished(job: &Job, dir: &Path, status: Status, why: String) -> RunRow {
         seed: job.seed,
         dir: dir.display().to_string(),
         status,
-        failed: vec![why],
+        failed,
         min_pair_m: None,
         clearance_m: None,
         parent_gap_s: None,
@@ -355,19 +351,21 @@ pub fn run(o: &CampaignOptions) -> anyhow::Result<Report> {
         let dir = o.out.join("runs").join(&job.name);
         let r = match Summary::read(&dir.join("summary.json")) {
             Ok(s) => row(job, &dir, &s),
-            Err(_) if stopping => unfinished(job, &dir, Status::Interrupted, "interrupted".into()),
+            Err(_) if stopping => {
+                unfinished(job, &dir, Status::Interrupted, vec!["interrupted".into()])
+            }
             Err(e) => unfinished(
                 job,
                 &dir,
                 Status::Error,
-                format!(
+                vec![format!(
                     "the run failed ({}; see {}): {e}",
                     match status {
                         Ok(s) => s.to_string(),
                         Err(e) => e.to_string(),
                     },
                     dir.join("run.log").display()
-                ),
+                )],
             ),
         };
         if r.status == Status::Pass {

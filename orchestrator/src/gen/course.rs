@@ -18,7 +18,9 @@
 
 use std::f64::consts::PI;
 
-use super::{SplitMix, WALL_OVERHANG_M};
+use sonar::Obstacle as Solid;
+
+use super::{mm, SplitMix, WALL_OVERHANG_M};
 
 /// How far past the end of a turn's arc the next gate starts at the least, m.
 pub const TURN_CLEAR_M: f64 = 25.0;
@@ -103,29 +105,6 @@ impl std::fmt::Display for Family {
     }
 }
 
-/// A solid of the course, NED.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Solid {
-    /// A box rotated about the vertical.
-    Box {
-        /// Centre, NED, m.
-        center_ned_m: [f64; 3],
-        /// Half extents (along, across, vertical) before the yaw, m.
-        half_extents_m: [f64; 3],
-        /// Yaw, deg (from north toward east).
-        yaw_deg: f64,
-    },
-    /// A vertical cylinder.
-    Cylinder {
-        /// Centre, NED, m.
-        center_ned_m: [f64; 3],
-        /// Radius, m.
-        radius_m: f64,
-        /// Half height, m.
-        half_height_m: f64,
-    },
-}
-
 /// What the course is fitted to: the formation's size and the gate's gap.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Geom {
@@ -157,7 +136,7 @@ pub struct Course {
     pub family: Family,
     /// One line on what this one is (the seed's draw).
     pub what: String,
-    /// The solids.
+    /// The solids (boxes and cylinders), NED.
     pub solids: Vec<Solid>,
     /// The leader's waypoints (NED, m), the goal last.
     pub waypoints: Vec<[f64; 3]>,
@@ -310,12 +289,12 @@ impl<'a> Builder<'a> {
         let right = psi + PI / 2.0;
         self.solids.push(Solid::Box {
             center_ned_m: [
-                p[0] + e * right.cos(),
-                p[1] + e * right.sin(),
-                p[2] + self.g.z_offset_m,
+                mm(p[0] + e * right.cos()),
+                mm(p[1] + e * right.sin()),
+                mm(p[2] + self.g.z_offset_m),
             ],
-            half_extents_m: [half_along, half_across, self.g.half_height_m],
-            yaw_deg: (psi.to_degrees() + rel_yaw_deg + 540.0).rem_euclid(360.0) - 180.0,
+            half_extents_m: [mm(half_along), mm(half_across), mm(self.g.half_height_m)],
+            yaw_deg: mm((psi.to_degrees() + rel_yaw_deg + 540.0).rem_euclid(360.0) - 180.0),
         });
         self.end_m = self.end_m.max(s + half_along);
     }
@@ -324,12 +303,12 @@ impl<'a> Builder<'a> {
         let right = psi + PI / 2.0;
         self.solids.push(Solid::Cylinder {
             center_ned_m: [
-                p[0] + e * right.cos(),
-                p[1] + e * right.sin(),
-                p[2] + self.g.z_offset_m,
+                mm(p[0] + e * right.cos()),
+                mm(p[1] + e * right.sin()),
+                mm(p[2] + self.g.z_offset_m),
             ],
-            radius_m: r,
-            half_height_m: self.g.half_height_m,
+            radius_m: mm(r),
+            half_height_m: mm(self.g.half_height_m),
         });
         self.end_m = self.end_m.max(s + r);
     }

@@ -307,28 +307,9 @@ pub(super) fn render_obstacles(t: &mut String, p: &Plan) -> std::fmt::Result {
         for solid in &c.solids {
             writeln!(t)?;
             writeln!(t, "[[obstacles]]")?;
-            match solid {
-                course::Solid::Box {
-                    center_ned_m,
-                    half_extents_m,
-                    yaw_deg,
-                } => {
-                    writeln!(t, "kind = \"box\"")?;
-                    writeln!(t, "center_ned_m = {}", vec3(*center_ned_m))?;
-                    writeln!(t, "half_extents_m = {}", vec3(*half_extents_m))?;
-                    writeln!(t, "yaw_deg = {}", num(*yaw_deg))?;
-                }
-                course::Solid::Cylinder {
-                    center_ned_m,
-                    radius_m,
-                    half_height_m,
-                } => {
-                    writeln!(t, "kind = \"cylinder\"")?;
-                    writeln!(t, "center_ned_m = {}", vec3(*center_ned_m))?;
-                    writeln!(t, "radius_m = {}", num(*radius_m))?;
-                    writeln!(t, "half_height_m = {}", num(*half_height_m))?;
-                }
-            }
+            // an obstacle serialises as the scenario's own table (sonar::Obstacle)
+            let table = toml::to_string(solid).map_err(|_| std::fmt::Error)?;
+            t.push_str(&table);
         }
         return Ok(());
     }

@@ -55,30 +55,10 @@ where
     let (top, bottom) = body.split_vertically(body.dim_in_pixel().1 * 2 / 5);
     let n = r.by_family.len().max(1) as f64;
     let x = -0.5..n - 0.5;
-    let names: Vec<String> = r.by_family.iter().map(|f| f.family.clone()).collect();
-    let label = move |v: &f64| {
-        let i = v.round();
-        if (v - i).abs() < 1e-6 && i >= 0.0 {
-            names.get(i as usize).cloned().unwrap_or_default()
-        } else {
-            String::new()
-        }
-    };
-
     // pass rate per family
     let (plot, legend_area) = split_legend(&top);
     let mut c = chart(&plot).build_cartesian_2d(x.clone(), 0.0..105.0)?;
-    c.configure_mesh()
-        .x_desc("family")
-        .y_desc("runs that pass (%)")
-        .x_labels(r.by_family.len() * 2 + 1)
-        .x_label_formatter(&label)
-        .y_label_formatter(&|v| num(*v))
-        .axis_desc_style(desc_style())
-        .label_style(tick_style())
-        .light_line_style(WHITE.mix(0.0))
-        .bold_line_style(GREY_300.stroke_width(1))
-        .draw()?;
+    family_mesh(&mut c, r, "family", "runs that pass (%)")?;
     for (i, f) in r.by_family.iter().enumerate() {
         let Some(p) = f.pass_rate else { continue };
         let i = i as f64;
@@ -114,26 +94,7 @@ where
     }
     let y = 0.0..b.hi.unwrap_or(5.0) * 1.05;
     let mut c = chart(&plot).build_cartesian_2d(x.clone(), y)?;
-    let names: Vec<String> = r.by_family.iter().map(|f| f.family.clone()).collect();
-    let label2 = move |v: &f64| {
-        let i = v.round();
-        if (v - i).abs() < 1e-6 && i >= 0.0 {
-            names.get(i as usize).cloned().unwrap_or_default()
-        } else {
-            String::new()
-        }
-    };
-    c.configure_mesh()
-        .x_desc("family (each dot a run)")
-        .y_desc("closest approach (m)")
-        .x_labels(r.by_family.len() * 2 + 1)
-        .x_label_formatter(&label2)
-        .y_label_formatter(&|v| num(*v))
-        .axis_desc_style(desc_style())
-        .label_style(tick_style())
-        .light_line_style(WHITE.mix(0.0))
-        .bold_line_style(GREY_300.stroke_width(1))
-        .draw()?;
+    family_mesh(&mut c, r, "family (each dot a run)", "closest approach (m)")?;
     let mut leg: Legend = Vec::new();
     for (fi, f) in r.by_family.iter().enumerate() {
         let runs: Vec<_> = r
@@ -176,5 +137,39 @@ where
         Some("half of it".into()),
     )?;
     draw_legend(&legend_area, &leg)?;
+    Ok(())
+}
+
+/// Grid, ticks and axis names of a chart whose x axis is the families (one
+/// per integer, named).
+fn family_mesh<'a, DB: DrawingBackend + 'a>(
+    c: &mut Chart<'a, DB>,
+    r: &Report,
+    x_desc: &str,
+    y_desc: &str,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let names: Vec<String> = r.by_family.iter().map(|f| f.family.clone()).collect();
+    let label = move |v: &f64| {
+        let i = v.round();
+        if (v - i).abs() < 1e-6 && i >= 0.0 {
+            names.get(i as usize).cloned().unwrap_or_default()
+        } else {
+            String::new()
+        }
+    };
+    c.configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .x_labels(r.by_family.len() * 2 + 1)
+        .x_label_formatter(&label)
+        .y_label_formatter(&|v| num(*v))
+        .axis_desc_style(desc_style())
+        .label_style(tick_style())
+        .light_line_style(WHITE.mix(0.0))
+        .bold_line_style(GREY_300.stroke_width(1))
+        .draw()?;
     Ok(())
 }
