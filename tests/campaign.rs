@@ -96,14 +96,9 @@ fn one_course_of_every_family_passes_and_the_report_says_so() {
         .join("summary.json");
     let written = || std::fs::metadata(&first).unwrap().modified().unwrap();
     let before = written();
-    let t0 = Instant::now();
     let o = run_shoal(&args);
     assert!(o.status.success());
-    assert!(
-        t0.elapsed() < Duration::from_secs(30),
-        "resumed, not re-run"
-    );
-    assert_eq!(before, written());
+    assert_eq!(before, written(), "resumed, not re-run");
 }
 
 #[test]

@@ -57,7 +57,7 @@ pub fn run(cmd: CompareCmd) -> anyhow::Result<()> {
         .collect();
     plots::write_compare_plot(&refs, &out).context("writing the comparison plot")?;
     let md = format!(
-        "# {} (seed {}): method vs acoustic baseline vs no vertical shift\n\nsafe distance {} m\n\n{}",
+        "# {} (seed {}): method vs as published vs acoustic baseline vs no vertical shift\n\nsafe distance {} m\n\n{}",
         base.name,
         base.seed,
         base.safety.safe_distance_m,
