@@ -61,6 +61,9 @@ pub struct CampaignOptions {
     pub keep_recordings: bool,
     /// No progress bar.
     pub quiet: bool,
+    /// Run the paper's method as published (`[method] generalised = false`):
+    /// the "before" of a change to the method.
+    pub published: bool,
 }
 
 /// One run of the campaign.
@@ -250,6 +253,11 @@ fn write_courses(o: &CampaignOptions, jobs: &[Job]) -> anyhow::Result<()> {
         })
         .with_context(|| format!("generating {}", j.name))?;
         let path = dir.join(format!("{}.toml", j.name));
+        let text = if o.published {
+            format!("{text}\n[method]\ngeneralised = false\n")
+        } else {
+            text
+        };
         std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
@@ -409,6 +417,7 @@ mod tests {
             bin_dir: None,
             keep_recordings: false,
             quiet: true,
+            published: false,
         }
     }
 

@@ -55,6 +55,10 @@ pub struct CampaignCmd {
     /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
+    /// Run the paper's method as published (`[method] generalised = false`),
+    /// to measure a change to the method against it.
+    #[arg(long)]
+    published: bool,
 }
 
 /// Runs the campaign, prints its table; exit status 3 if a run failed.
@@ -88,6 +92,7 @@ pub fn run(cmd: CampaignCmd) -> anyhow::Result<()> {
         bin_dir: cmd.bin_dir.clone(),
         keep_recordings: cmd.keep_recordings,
         quiet: cmd.quiet,
+        published: cmd.published,
     };
     let report = campaign::run(&o)?;
     print!("{}", report.markdown());

@@ -133,6 +133,9 @@ pub struct FollowerConfig {
     /// Keep the target `d_min_m` clear of remembered returns on the follower's side
     /// (default true; see `FollowerPlanner::keep_clear`).
     pub keep_clear: bool,
+    /// The headway's averages never exceed what the parent does now (default true;
+    /// `false`: the plain averages, as before issue 16).
+    pub headway_cap: bool,
     /// Room for tracking error `keep_clear` leaves beyond `d_min_m`, m (default 0.25).
     pub keep_clear_margin_m: f64,
     /// After losing its parent, a follower heads for the slot behind where the parent is
@@ -172,6 +175,7 @@ impl Default for FollowerConfig {
             max_rejections: 3,
             view_margin_deg: 3.0,
             keep_clear: true,
+            headway_cap: true,
             keep_clear_margin_m: 0.25,
             search_s: 10.0,
             memory_cell_m: 0.5,
@@ -973,11 +977,16 @@ impl FollowerPlanner {
         // does now: when the parent slows to a stop (or ends a turn) the slow average
         // would otherwise keep `v̄` (`r̄`) up for a minute and put the target that far
         // ahead of the slot (turned into the finished turn) while everyone is at rest.
-        let cap = v_level.norm();
+        let cap = if self.cfg.headway_cap {
+            v_level.norm()
+        } else {
+            f64::INFINITY
+        };
         if mean_v.norm() > cap {
             mean_v *= cap / mean_v.norm();
         }
-        if mean_r * r_parent <= 0.0 {
+        if !self.cfg.headway_cap {
+        } else if mean_r * r_parent <= 0.0 {
             mean_r = 0.0;
         } else if mean_r.abs() > r_parent.abs() {
             mean_r = r_parent;

@@ -36,6 +36,7 @@ pub fn follower_config(scenario: &Scenario, name: &str) -> anyhow::Result<Follow
         // the paper's method as published
         cfg.view_margin_deg = 0.0;
         cfg.keep_clear = false;
+        cfg.headway_cap = false;
         cfg.search_s = 0.0;
         cfg.memory_cell_m = 0.0;
     }
