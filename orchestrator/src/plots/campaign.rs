@@ -160,16 +160,11 @@ where
             String::new()
         }
     };
-    c.configure_mesh()
-        .x_desc(x_desc)
-        .y_desc(y_desc)
-        .x_labels(r.by_family.len() * 2 + 1)
-        .x_label_formatter(&label)
-        .y_label_formatter(&|v| num(*v))
-        .axis_desc_style(desc_style())
-        .label_style(tick_style())
-        .light_line_style(WHITE.mix(0.0))
-        .bold_line_style(GREY_300.stroke_width(1))
-        .draw()?;
-    Ok(())
+    mesh_with(
+        c,
+        x_desc,
+        y_desc,
+        false,
+        (r.by_family.len() * 2 + 1, &label),
+    )
 }

@@ -122,13 +122,27 @@ pub(crate) fn mesh<'a, DB: DrawingBackend + 'a>(
 where
     DB::ErrorType: 'static,
 {
+    mesh_with(c, x_desc, y_desc, negate_y, (12, &|v| num(*v)))
+}
+
+/// [`mesh`] with `x_labels` ticks on the horizontal axis, named by `x_fmt`.
+pub(crate) fn mesh_with<'a, DB: DrawingBackend + 'a>(
+    c: &mut Chart<'a, DB>,
+    x_desc: &str,
+    y_desc: &str,
+    negate_y: bool,
+    (x_labels, x_fmt): (usize, &dyn Fn(&f64) -> String),
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
     let fy = move |v: &f64| num(if negate_y { -*v } else { *v });
     c.configure_mesh()
         .x_desc(x_desc)
         .y_desc(y_desc)
-        .x_label_formatter(&|v| num(*v))
+        .x_label_formatter(x_fmt)
         .y_label_formatter(&fy)
-        .x_labels(12)
+        .x_labels(x_labels)
         .y_labels(10)
         .axis_desc_style(desc_style())
         .label_style(tick_style())
