@@ -135,6 +135,23 @@ pub(crate) fn stretches(
     out
 }
 
+/// Longest time between two valid fixes (or from the first frame to the first fix, or
+/// from the last fix to the last frame), s: `(t ns, valid)` in time order.
+pub(crate) fn longest_gap_s(frames: &[(u64, bool)]) -> f64 {
+    let Some(&(first, _)) = frames.first() else {
+        return 0.0;
+    };
+    let end = frames.last().map_or(first, |f| f.0);
+    let (mut since, mut longest) = (first, 0u64);
+    for &(t, valid) in frames {
+        if valid {
+            longest = longest.max(t - since);
+            since = t;
+        }
+    }
+    longest.max(end - since) as f64 * 1e-9
+}
+
 /// Stretches longer than `limit_s` without a fix of the parent, from a
 /// follower's first camera frame to its last: `(t ns, valid)` in time order.
 pub(crate) fn lost_stretches(vehicle: &str, frames: &[(u64, bool)], limit_s: f64) -> Vec<Stretch> {
@@ -301,10 +318,7 @@ pub fn perception(
         frames.sort_by_key(|f| f.0);
         out.parent_lost
             .extend(lost_stretches(&v.name, &frames, PARENT_LOST_LIMIT_S));
-        let longest = lost_stretches(&v.name, &frames, 0.0)
-            .iter()
-            .map(|s| s.to_s - s.from_s)
-            .fold(0.0, f64::max);
+        let longest = longest_gap_s(&frames);
         out.longest_parent_gap_s.insert(v.name.clone(), longest);
         let frac = if poses.is_empty() {
             0.0
@@ -629,6 +643,9 @@ yaw_deg = 0.0
         let lost = lost_stretches("F2", &never, PARENT_LOST_LIMIT_S);
         assert_eq!(lost.len(), 1);
         approx::assert_relative_eq!(lost[0].to_s - lost[0].from_s, 6.0, epsilon = 1e-9);
+        // the longest gap agrees with the stretches
+        approx::assert_relative_eq!(longest_gap_s(&frames), 6.5, epsilon = 1e-9);
+        approx::assert_relative_eq!(longest_gap_s(&never), 6.0, epsilon = 1e-9);
         let mut sum = Summary::default();
         sum.perception.parent_lost = lost;
         let v = verdict(&sum);
