@@ -374,7 +374,12 @@ fn turn_radius_m(members: &[Member]) -> f64 {
         camera.mount_position_body_m,
         camera.fov_deg.to_radians() / 2.0,
     )
-    .map_or(0.0, |m| planner::view::turn_radius_m(m, SPEED_MPS))
+    .map_or(0.0, |m| {
+        let reserve = planner::FollowerConfig::default()
+            .view_margin_deg
+            .to_radians();
+        planner::view::turn_radius_m(m, reserve, SPEED_MPS)
+    })
 }
 
 /// Plans the scenario (everything but the text).

@@ -145,6 +145,10 @@ pub struct FollowerConfig {
     /// Returns closer than this to a remembered one refresh it instead of adding a point,
     /// m (default 0.5; 0: every return is a point, oldest dropped when full).
     pub memory_cell_m: f64,
+    /// The observer predicts the parent along its estimated turn (default true; false:
+    /// straight on, as the paper's constant-velocity observer; see
+    /// [`ObserverParams::coordinated_turn`]).
+    pub coordinated_turn: bool,
 }
 
 impl Default for FollowerConfig {
@@ -179,6 +183,7 @@ impl Default for FollowerConfig {
             keep_clear_margin_m: 0.25,
             search_s: 10.0,
             memory_cell_m: 0.5,
+            coordinated_turn: true,
             view_half_angle_deg: 45.0,
             camera_mount_body_m: [1.4, 0.0, 0.0],
             parent_beacons_body_m: vec![
@@ -425,6 +430,7 @@ impl FollowerPlanner {
                 gate_chi2: cfg.gate_chi2,
                 max_rejections: cfg.max_rejections,
                 initial_speed_std_mps: 1.0,
+                coordinated_turn: cfg.coordinated_turn,
             })),
             t_start: None,
             t_prev: 0.0,

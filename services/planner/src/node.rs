@@ -39,6 +39,7 @@ pub fn follower_config(scenario: &Scenario, name: &str) -> anyhow::Result<Follow
         cfg.headway_cap = false;
         cfg.search_s = 0.0;
         cfg.memory_cell_m = 0.0;
+        cfg.coordinated_turn = false;
     }
     cfg.d_a_m = spec
         .d_a_m
@@ -67,9 +68,12 @@ pub fn memory_behind_m(scenario: &Scenario, name: &str, default: f64) -> f64 {
 }
 
 /// The leader's turn radius that keeps every follower's parent in view
-/// ([`crate::view`]): from the slots, the camera's field of view and mount, and the
-/// beacon layout; 0 (sharp corners) without followers.
+/// ([`crate::view`]): from the slots, the camera's field of view and mount, the
+/// beacon layout and the followers' keep-in-view margin; 0 (sharp corners) without
+/// followers.
 pub fn turn_radius_m(scenario: &Scenario, speed_mps: f64) -> anyhow::Result<f64> {
+    let follower: FollowerConfig = scenario.section("follower")?;
+    let reserve = follower.view_margin_deg.to_radians();
     let camera: camera_pose::CameraConfig = scenario.section("camera")?;
     let beacons: camera_pose::BeaconLayout = scenario.section("beacons")?;
     let margin = crate::view::view_margin_rad(
@@ -78,7 +82,7 @@ pub fn turn_radius_m(scenario: &Scenario, speed_mps: f64) -> anyhow::Result<f64>
         camera.mount_position_body_m,
         camera.fov_deg.to_radians() / 2.0,
     );
-    Ok(margin.map_or(0.0, |m| crate::view::turn_radius_m(m, speed_mps)))
+    Ok(margin.map_or(0.0, |m| crate::view::turn_radius_m(m, reserve, speed_mps)))
 }
 
 /// The one key of sim-plant's `[nav]` section the leader's position filter needs; absent →

@@ -10,7 +10,8 @@
 //! likewise cancels: the absolute heading is never needed.
 //!
 //! Model, per axis: `p' = v`, `v'` = white acceleration of density `σ_a²`; heading
-//! `ψ' = r`, `r'` = white of density `σ_ψ̈²`. A fix taken at `t_m ≤ t` updates the state at
+//! `ψ' = r`, `r'` = white of density `σ_ψ̈²`; with `coordinated_turn` the horizontal velocity
+//! also turns at `r` (the parent's course follows its heading). A fix taken at `t_m ≤ t` updates the state at
 //! `t` through `H = [I, −(t − t_m) I]` (the state extrapolated back), so camera latency does not
 //! bias the estimate. Fixes whose Mahalanobis distance exceeds the gate are rejected; after
 //! `max_rejections` rejections in a row the filter restarts from the latest fix (the parent
@@ -33,6 +34,11 @@ pub struct ObserverParams {
     pub max_rejections: u32,
     /// Initial velocity standard deviation after a (re)start, m/s.
     pub initial_speed_std_mps: f64,
+    /// The horizontal velocity turns with the estimated turn rate (a coordinated turn)
+    /// instead of keeping its direction (our addition; the paper's observer is
+    /// constant-velocity): a parent predicted through a loss in a turn then goes on
+    /// turning, where its follower looks for it, instead of straight out of its view.
+    pub coordinated_turn: bool,
 }
 
 /// What happened to a fix.
@@ -125,6 +131,19 @@ impl ParentObserver {
         let mut f = Matrix6::identity();
         for i in 0..3 {
             f[(i, i + 3)] = dt;
+        }
+        let r = self.y[1];
+        if self.params.coordinated_turn && (r * dt).abs() > 1e-9 {
+            // the horizontal velocity turns by r·dt, the position moves along the arc
+            let (s, c) = (r * dt).sin_cos();
+            f[(0, 3)] = s / r;
+            f[(0, 4)] = -(1.0 - c) / r;
+            f[(1, 3)] = (1.0 - c) / r;
+            f[(1, 4)] = s / r;
+            f[(3, 3)] = c;
+            f[(3, 4)] = -s;
+            f[(4, 3)] = s;
+            f[(4, 4)] = c;
         }
         let qa = self.params.accel_noise_mps2.powi(2);
         let mut q = Matrix6::zeros();
@@ -236,5 +255,51 @@ impl ParentObserver {
             self.py = iky * self.py * iky.transpose() + ky * ky.transpose() * yaw_var;
         }
         FixOutcome::Accepted
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A parent on a circle of radius 30 m at 1 m/s, fixed every 0.1 s for 20 s, then
+    /// predicted 5 s without a fix: the coordinated turn keeps it near the circle.
+    fn predicted_miss_m(coordinated_turn: bool) -> f64 {
+        let (radius, speed) = (30.0, 1.0);
+        let w = speed / radius;
+        let at = |t: f64| {
+            let a = w * t;
+            (
+                Vector3::new(radius * a.sin(), radius * (1.0 - a.cos()), 10.0),
+                a,
+            )
+        };
+        let mut o = ParentObserver::new(ObserverParams {
+            accel_noise_mps2: 0.1,
+            yaw_accel_noise_radps2: 0.02,
+            gate_chi2: 16.27,
+            max_rejections: 3,
+            initial_speed_std_mps: 1.0,
+            coordinated_turn,
+        });
+        let r = Matrix3::identity() * 0.05f64.powi(2);
+        let v0 = Vector3::new(speed, 0.0, 0.0);
+        for k in 0..=200 {
+            let t = f64::from(k) * 0.1;
+            let (p, yaw) = at(t);
+            o.predict(t);
+            o.fuse(t, &p, &r, yaw, 0.02f64.powi(2), &v0);
+        }
+        o.predict(25.0);
+        (o.position() - at(25.0).0).norm()
+    }
+
+    #[test]
+    fn a_parent_lost_in_a_turn_is_predicted_along_it() {
+        let turning = predicted_miss_m(true);
+        let straight = predicted_miss_m(false);
+        assert!(turning < 0.1, "{turning}");
+        // straight on: off by about v·w·t²/2 = 0.42 m after 5 s
+        assert!(straight > 0.3, "{straight}");
     }
 }

@@ -7,9 +7,13 @@
 //! follower's heading lags behind (its observer estimates the parent's heading
 //! from vision, its controller then turns it), and the parent's beacons drift
 //! toward the image edge by about `turn rate × lag`. The leader therefore turns
-//! no faster than `margin / lag`, the margin being the smallest angle between
-//! any follower's view of its parent's beacons and its image edge: a corner of
-//! the route is flown as an arc of radius `speed / rate`.
+//! no faster than `(margin − reserve) / lag`, the margin being the smallest angle
+//! between any follower's view of its parent's beacons and its image edge, the
+//! reserve the followers' own keep-in-view margin (`[follower] view_margin_deg`):
+//! in a steady turn no follower has to leave its slot's heading to keep its
+//! parent in view, and the heading loop's lag behind a follower's keep-in-view
+//! target has that reserve to spend. A corner of the route is flown as an arc of
+//! radius `speed / rate`.
 
 /// Lag of a follower's heading behind its parent's in a turn, s: the vision
 /// observer's delay plus the heading loop's and the heading headway's.
@@ -50,15 +54,16 @@ pub fn view_margin_rad(
         .reduce(f64::min)
 }
 
-/// The radius of the leader's turns at `speed_mps` for a view margin, m:
-/// `speed / (margin / VIEW_LAG_S)`.
-pub fn turn_radius_m(margin_rad: f64, speed_mps: f64) -> f64 {
-    speed_mps * VIEW_LAG_S / margin_rad.max(MIN_MARGIN_RAD)
+/// The radius of the leader's turns at `speed_mps` for a view margin and the
+/// followers' reserve, m: `speed / ((margin − reserve) / VIEW_LAG_S)`.
+pub fn turn_radius_m(margin_rad: f64, reserve_rad: f64, speed_mps: f64) -> f64 {
+    speed_mps * VIEW_LAG_S / (margin_rad - reserve_rad).max(MIN_MARGIN_RAD)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use approx::assert_relative_eq;
 
     const BEACONS: [[f64; 3]; 4] = [
         [-1.50, 0.00, 0.00],
@@ -83,10 +88,14 @@ mod tests {
 
     #[test]
     fn a_smaller_margin_means_wider_turns() {
-        let wide = turn_radius_m(2f64.to_radians(), 1.0);
-        let tight = turn_radius_m(10f64.to_radians(), 1.0);
+        let wide = turn_radius_m(2f64.to_radians(), 0.0, 1.0);
+        let tight = turn_radius_m(10f64.to_radians(), 0.0, 1.0);
         assert!(wide > tight && tight > 0.0);
-        assert!(turn_radius_m(-1.0, 1.0).is_finite());
+        assert!(turn_radius_m(-1.0, 0.0, 1.0).is_finite());
+        // the followers' reserve comes off the margin
+        let reserved = turn_radius_m(10f64.to_radians(), 3f64.to_radians(), 1.0);
+        assert_relative_eq!(reserved, turn_radius_m(7f64.to_radians(), 0.0, 1.0));
+        assert!(turn_radius_m(3f64.to_radians(), 3f64.to_radians(), 1.0).is_finite());
         assert!(view_margin_rad([], &BEACONS, [1.4, 0.0, 0.0], 0.7).is_none());
     }
 }
