@@ -480,3 +480,39 @@ fn the_recorder_counts_what_it_could_not_record() {
     // The count agrees with the sequence gaps a reader sees in the file.
     assert_eq!(dropped, gaps);
 }
+
+#[test]
+fn a_second_run_into_the_same_directory_is_refused_unless_forced() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = write_scenario(tmp.path(), "again.toml", &small_scenario("again", 2.0));
+    let out = tmp.path().join("again");
+    let mine = out.join("notes.txt");
+    let run = |force: bool| {
+        let mut args = vec!["run", "--quiet", scenario.to_str().unwrap(), "--out"];
+        args.push(out.to_str().unwrap());
+        if force {
+            args.push("--force");
+        }
+        run_shoal(&args)
+    };
+    assert!(run(false).status.success());
+    std::fs::write(&mine, "kept").unwrap();
+    let first = std::fs::read(out.join("summary.json")).unwrap();
+    let refused = run(false);
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(err.contains("--force"), "{err}");
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), first);
+    let forced = run(true);
+    assert!(
+        forced.status.success(),
+        "{}",
+        String::from_utf8_lossy(&forced.stderr)
+    );
+    // a fresh run: its own id, the recording reads, the user's file is untouched
+    let summary = summary(&out);
+    let before: serde_json::Value = serde_json::from_slice(&first).unwrap();
+    assert_ne!(summary["run_id"], before["run_id"]);
+    assert!(Recording::open(&out.join("recording.mcap")).is_ok());
+    assert_eq!(std::fs::read_to_string(&mine).unwrap(), "kept");
+}

@@ -10,6 +10,35 @@ use crate::analysis::summary::{summarize, Summary};
 use crate::launch::{self, RunSettings};
 use crate::{plots, preflight};
 
+/// What a run writes into its output directory (and `--force` removes).
+pub const RUN_OUTPUTS: [&str; 6] = [
+    "recording.mcap",
+    "summary.json",
+    "plots",
+    "logs",
+    "run.json",
+    "scenario.toml",
+];
+
+/// Removes what an earlier run left in `out` ([`RUN_OUTPUTS`]), nothing else.
+pub fn clear_outputs(out: &Path) -> anyhow::Result<()> {
+    for name in RUN_OUTPUTS {
+        let p = out.join(name);
+        let removed = if p.is_dir() {
+            std::fs::remove_dir_all(&p)
+        } else {
+            std::fs::remove_file(&p)
+        };
+        match removed {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(e).with_context(|| format!("cannot remove {}", p.display()));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 /// A finished, summarised run.
 pub struct Finished {
     /// What summary.json holds.
@@ -33,7 +62,7 @@ pub fn run_and_summarize(
     }
     if out.join("recording.mcap").exists() {
         anyhow::bail!(
-            "{} already holds a recording; choose another --out (nothing was overwritten)",
+            "{} already holds a recording; choose another --out, or --force to replace it (nothing was overwritten)",
             out.display()
         );
     }
@@ -47,4 +76,32 @@ pub fn run_and_summarize(
         scenario,
         recording: rec,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn clearing_removes_a_runs_outputs_and_nothing_else() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path();
+        for name in RUN_OUTPUTS {
+            if name.contains('.') {
+                std::fs::write(out.join(name), "x").unwrap();
+            } else {
+                std::fs::create_dir_all(out.join(name).join("inner")).unwrap();
+            }
+        }
+        std::fs::write(out.join("notes.txt"), "mine").unwrap();
+        clear_outputs(out).unwrap();
+        for name in RUN_OUTPUTS {
+            assert!(!out.join(name).exists(), "{name}");
+        }
+        assert!(out.join("notes.txt").exists());
+        // nothing there: fine
+        clear_outputs(out).unwrap();
+        clear_outputs(&out.join("missing")).unwrap();
+    }
 }

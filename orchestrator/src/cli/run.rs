@@ -12,9 +12,15 @@ use crate::{pipeline, preflight};
 pub struct RunCmd {
     /// Scenario TOML (default: the embedded `scenarios/paper.toml`).
     scenario: Option<PathBuf>,
-    /// Output directory (default: runs/<scenario>-<unix time>).
+    /// Output directory (default: runs/<scenario>-<unix time>); it receives
+    /// recording.mcap, summary.json, plots/, logs/, run.json and scenario.toml.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Replace what an earlier run left in `--out` (the files above; nothing
+    /// else in the directory is touched). Without it a directory that holds a
+    /// recording is refused and nothing is overwritten.
+    #[arg(long)]
+    force: bool,
     /// lockstep: deterministic, as fast as the machine allows; realtime: every
     /// process on its own wall-clock rate.
     #[arg(long, value_enum, default_value = "lockstep")]
@@ -71,6 +77,9 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
         .unwrap_or_else(|| launch::default_out(&scenario));
     let mut settings = cmd.processes.settings(cmd.mode, cmd.quiet)?;
     settings.spin_us = cmd.spin_us;
+    if cmd.force {
+        pipeline::clear_outputs(&out)?;
+    }
     let summary = pipeline::run_and_summarize(scenario, &out, &settings)?.summary;
     if !cmd.quiet {
         print_table(&summary);
