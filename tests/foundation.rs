@@ -196,7 +196,9 @@ fn sigint_to_shoal_stops_every_child_and_leaves_no_shared_memory() {
         !status.success(),
         "an interrupted run must not report success"
     );
-    assert!(err.contains("interrupted"), "{err}");
+    // the shell's convention: 128 + SIGINT
+    assert_eq!(status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted by SIGINT"), "{err}");
     assert_domain_clean(&run_id);
     // The recording made so far is complete and readable.
     let rec = Recording::open(&out.join("recording.mcap")).unwrap();

@@ -146,7 +146,7 @@ fn bench_scale_writes_its_table_figures_and_plot() {
         "scale",
         "--vehicles",
         "3,6",
-        "--duration-s",
+        "--duration",
         "2",
         "--plots",
         "--out",

@@ -56,7 +56,7 @@ pub struct RunBenchCmd {
     #[arg(long, default_value_t = 60.0)]
     pub realtime_duration: f64,
     /// Simulated seconds of each lockstep run (default: the scenario's).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = crate::cli::parse_duration)]
     pub duration: Option<f64>,
     /// Seed of every random generator (overrides the scenario's).
     #[arg(long)]

@@ -23,6 +23,15 @@ pub use run::ProcessArgs;
 
 use crate::{bench, launch};
 
+/// A `--duration`: a finite number of seconds > 0 (one spelling and one check for
+/// every command that takes one; `-5` reaches it instead of being taken for a flag).
+pub fn parse_duration(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(d) if d.is_finite() && d > 0.0 => Ok(d),
+        _ => Err(format!("`{s}` is not a positive number of seconds")),
+    }
+}
+
 /// Leader–follower AUV formations as multi-process soft-real-time software.
 #[derive(Debug, Parser)]
 #[command(name = "shoal", version, about, long_about = None)]
@@ -34,7 +43,7 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Cmd {
     /// Run a scenario (default: the paper's) and leave DIR/recording.mcap,
-    /// DIR/summary.json and DIR/logs/.
+    /// DIR/summary.json, DIR/plots/ and DIR/logs/.
     Run(run::RunCmd),
     /// Validate a scenario without starting anything.
     Check {
@@ -116,7 +125,40 @@ pub fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::FAILURE
+            exit_code(&e)
+        }
+    }
+}
+
+/// The shell's convention for a run stopped by a signal: 128 + its number
+/// (130 after Ctrl-C, 143 after SIGTERM); 1 for any other error.
+fn exit_code(e: &anyhow::Error) -> ExitCode {
+    let signal = e.chain().find_map(|c| match c.downcast_ref() {
+        Some(launch::RunError::Interrupted("SIGINT")) => Some(libc::SIGINT),
+        Some(launch::RunError::Interrupted("SIGTERM")) => Some(libc::SIGTERM),
+        _ => None,
+    });
+    signal.map_or(ExitCode::FAILURE, |s| ExitCode::from(128 + s as u8))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn a_negative_or_zero_duration_is_refused_with_its_reason() {
+        for cmd in [["run"].as_slice(), &["bench", "scale"], &["bench", "run"]] {
+            for bad in ["-5", "0", "nan", "x"] {
+                let args = [&["shoal"], cmd, &["--duration", bad]].concat();
+                let err = Cli::try_parse_from(args).unwrap_err().to_string();
+                assert!(
+                    err.contains("not a positive number of seconds"),
+                    "{cmd:?} {bad}: {err}"
+                );
+            }
+            let args = [&["shoal"], cmd, &["--duration", "2.5"]].concat();
+            assert!(Cli::try_parse_from(args).is_ok(), "{cmd:?}");
         }
     }
 }

@@ -28,8 +28,8 @@ pub struct RunCmd {
     /// Seed of every random generator (overrides the scenario's).
     #[arg(long)]
     seed: Option<u64>,
-    /// Simulated duration in seconds (overrides the scenario's).
-    #[arg(long)]
+    /// Simulated duration in seconds (overrides the scenario's; > 0).
+    #[arg(long, allow_negative_numbers = true, value_parser = super::parse_duration)]
     duration: Option<f64>,
     #[command(flatten)]
     processes: ProcessArgs,

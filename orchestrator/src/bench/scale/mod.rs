@@ -2,7 +2,7 @@
 //!
 //! For each group size N of `--vehicles` (default 5, 25, 50, 100) it
 //! generates a scenario with the generator of `shoal gen` (`--shape`,
-//! `--seed`), cuts it to `--duration-s` simulated seconds, checks that the
+//! `--seed`), cuts it to `--duration` simulated seconds, checks that the
 //! machine can hold the run ([`preflight::needs`] / [`preflight::fits`]: processes,
 //! `/dev/shm`, open files) and runs it in lockstep through the same code as
 //! `shoal run`, into `OUT/nNNN/` (recording, summary.json, logs). A size the
@@ -88,7 +88,7 @@ const REFERENCE_N: usize = 25;
 #[command(
     long_about = "What a group costs as it grows. For each N of --vehicles, generate a scenario \
                   as `shoal gen --vehicles N --shape SHAPE --seed SEED` does, run it in lockstep \
-                  for --duration-s simulated seconds and report: processes, real-time factor, \
+                  for --duration simulated seconds and report: processes, real-time factor, \
                   wall time spent starting and stopping the processes, \
                   total CPU time per vehicle-second (every process, the orchestrator included), \
                   peak memory (sum of every process's peak RSS, and of its private memory, \
@@ -97,7 +97,7 @@ const REFERENCE_N: usize = 25;
                   A size the machine cannot hold (processes, /dev/shm, open files; see `shoal \
                   check`) is skipped with the reason. Writes OUT/scale.md, OUT/scale.json and \
                   OUT/scale.png/.svg (cost and real-time factor against N); each run stays in \
-                  OUT/nNNN/.\n\nExample: shoal bench scale --vehicles 5,25 --duration-s 20"
+                  OUT/nNNN/.\n\nExample: shoal bench scale --vehicles 5,25 --duration 20"
 )]
 pub struct ScaleCmd {
     /// Group sizes to run, vehicles with the leader, comma-separated (each
@@ -109,7 +109,8 @@ pub struct ScaleCmd {
     pub shape: Shape,
     /// Simulated seconds of each run (the generated scenario's own duration
     /// is replaced; 30 s covers the start, not the gates).
-    #[arg(long, default_value_t = 30.0, value_parser = parse_duration)]
+    #[arg(long = "duration", default_value_t = 30.0, allow_negative_numbers = true,
+          value_parser = crate::cli::parse_duration)]
     pub duration_s: f64,
     /// Seed of the generator and of the scenario's noise (as `shoal gen --seed`).
     #[arg(long, default_value_t = 0)]
@@ -138,13 +139,6 @@ fn parse_vehicles(s: &str) -> Result<usize, String> {
         ));
     }
     Ok(n)
-}
-
-fn parse_duration(s: &str) -> Result<f64, String> {
-    match s.trim().parse::<f64>() {
-        Ok(d) if d.is_finite() && d > 0.0 => Ok(d),
-        _ => Err(format!("`{s}` is not a positive number of seconds")),
-    }
 }
 
 /// Generates the scenario of `n` vehicles, cut to `duration_s`, resolved.
@@ -444,16 +438,20 @@ mod tests {
         assert_eq!(c.shape, Shape::Triangle);
         assert_eq!(c.duration_s, 30.0);
         assert!(c.out.is_none() && !c.plots);
-        let c = parse(&["--vehicles", "25,5", "--duration-s", "20", "--shape", "v"]).unwrap();
+        let c = parse(&["--vehicles", "25,5", "--duration", "20", "--shape", "v"]).unwrap();
         assert_eq!(c.vehicles, vec![25, 5]);
         assert_eq!(c.duration_s, 20.0);
         assert_eq!(c.shape, Shape::V);
         assert!(parse(&["--vehicles", "1"]).is_err());
         assert!(parse(&["--vehicles", &(gen::MAX_VEHICLES + 1).to_string()]).is_err());
         assert!(parse(&["--vehicles", "5,x"]).is_err());
-        assert!(parse(&["--duration-s", "0"]).is_err());
-        assert!(parse(&["--duration-s", "-3"]).is_err());
-        assert!(parse(&["--duration-s", "nan"]).is_err());
+        assert!(parse(&["--duration", "0"]).is_err());
+        let refused = parse(&["--duration", "-3"]).unwrap_err().to_string();
+        assert!(
+            refused.contains("not a positive number of seconds"),
+            "{refused}"
+        );
+        assert!(parse(&["--duration", "nan"]).is_err());
     }
 
     #[test]
