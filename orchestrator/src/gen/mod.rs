@@ -373,20 +373,15 @@ fn assign(
 /// The radius the leader will fly the course's corners on (what the planner
 /// derives from the default camera and beacons, [`planner::view`]), m.
 fn turn_radius_m(members: &[Member]) -> f64 {
-    let camera = CameraConfig::default();
-    let beacons = camera_pose::BeaconLayout::default();
-    planner::view::view_margin_rad(
+    planner::view::formation_turn_radius_m(
         members.iter().filter_map(|m| m.slot_m),
-        &beacons.positions_body_m,
-        camera.mount_position_body_m,
-        camera.fov_deg.to_radians() / 2.0,
-    )
-    .map_or(0.0, |m| {
-        let reserve = planner::FollowerConfig::default()
+        &CameraConfig::default(),
+        &camera_pose::BeaconLayout::default(),
+        planner::FollowerConfig::default()
             .view_margin_deg
-            .to_radians();
-        planner::view::turn_radius_m(m, reserve, SPEED_MPS)
-    })
+            .to_radians(),
+        SPEED_MPS,
+    )
 }
 
 /// Plans the scenario (everything but the text).

@@ -983,19 +983,16 @@ impl FollowerPlanner {
         // does now: when the parent slows to a stop (or ends a turn) the slow average
         // would otherwise keep `v̄` (`r̄`) up for a minute and put the target that far
         // ahead of the slot (turned into the finished turn) while everyone is at rest.
-        let cap = if self.cfg.headway_cap {
-            v_level.norm()
-        } else {
-            f64::INFINITY
-        };
-        if mean_v.norm() > cap {
-            mean_v *= cap / mean_v.norm();
-        }
-        if !self.cfg.headway_cap {
-        } else if mean_r * r_parent <= 0.0 {
-            mean_r = 0.0;
-        } else if mean_r.abs() > r_parent.abs() {
-            mean_r = r_parent;
+        if self.cfg.headway_cap {
+            let cap = v_level.norm();
+            if mean_v.norm() > cap {
+                mean_v *= cap / mean_v.norm();
+            }
+            if mean_r * r_parent <= 0.0 {
+                mean_r = 0.0;
+            } else if mean_r.abs() > r_parent.abs() {
+                mean_r = r_parent;
+            }
         }
         self.slot.headway_mean = Some((mean_v, mean_r));
         let headway = (v_own - from_level(yaw_parent, &mean_v)) * self.cfg.headway_s;

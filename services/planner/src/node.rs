@@ -76,13 +76,13 @@ pub fn turn_radius_m(scenario: &Scenario, speed_mps: f64) -> anyhow::Result<f64>
     let reserve = follower.view_margin_deg.to_radians();
     let camera: camera_pose::CameraConfig = scenario.section("camera")?;
     let beacons: camera_pose::BeaconLayout = scenario.section("beacons")?;
-    let margin = crate::view::view_margin_rad(
+    Ok(crate::view::formation_turn_radius_m(
         scenario.vehicles.iter().filter_map(|v| v.slot_m),
-        &beacons.positions_body_m,
-        camera.mount_position_body_m,
-        camera.fov_deg.to_radians() / 2.0,
-    );
-    Ok(margin.map_or(0.0, |m| crate::view::turn_radius_m(m, reserve, speed_mps)))
+        &camera,
+        &beacons,
+        reserve,
+        speed_mps,
+    ))
 }
 
 /// The one key of sim-plant's `[nav]` section the leader's position filter needs; absent →

@@ -60,6 +60,26 @@ pub fn turn_radius_m(margin_rad: f64, reserve_rad: f64, speed_mps: f64) -> f64 {
     speed_mps * VIEW_LAG_S / (margin_rad - reserve_rad).max(MIN_MARGIN_RAD)
 }
 
+/// The leader's turn radius at `speed_mps` for followers at `slots` (each in its
+/// parent's frame) seen by `camera` with the parent's `beacons`, keeping the
+/// followers' `reserve_rad`, m; 0 (sharp corners) without followers. What
+/// `shoal run` flies and `shoal gen` lays its courses out for.
+pub fn formation_turn_radius_m(
+    slots: impl IntoIterator<Item = [f64; 3]>,
+    camera: &camera_pose::CameraConfig,
+    beacons: &camera_pose::BeaconLayout,
+    reserve_rad: f64,
+    speed_mps: f64,
+) -> f64 {
+    view_margin_rad(
+        slots,
+        &beacons.positions_body_m,
+        camera.mount_position_body_m,
+        camera.fov_deg.to_radians() / 2.0,
+    )
+    .map_or(0.0, |m| turn_radius_m(m, reserve_rad, speed_mps))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
