@@ -4,9 +4,10 @@
 //! names the key); the good scenarios in `scenarios/` pass.
 //!
 //! Each corpus file starts with comment lines:
-//! `# <what is wrong>`, `# expect: <substring of the error>`, and
-//! optionally `# rlimit-nofile: N` (the check runs under `ulimit -n N`, for
-//! the "impossible for this machine" cases).
+//! `# <what is wrong>`, `# expect: <substring of the error>`, optionally
+//! `# at: LINE` (the message starts `FILE:LINE: `, as a compiler's does),
+//! and optionally `# rlimit-nofile: N` (the check runs under `ulimit -n N`,
+//! for the "impossible for this machine" cases).
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::path::{Path, PathBuf};
@@ -19,6 +20,7 @@ struct Case {
     path: PathBuf,
     what: String,
     expect: String,
+    at_line: Option<usize>,
     rlimit_nofile: Option<u64>,
 }
 
@@ -51,6 +53,7 @@ fn corpus() -> Vec<Case> {
                     .trim()
                     .to_string(),
                 expect,
+                at_line: header("# at:").map(|v| v.parse().unwrap()),
                 rlimit_nofile: header("# rlimit-nofile:").map(|v| v.parse().unwrap()),
                 path,
             }
@@ -137,6 +140,14 @@ fn every_bad_scenario_is_refused_naming_the_key() {
                 "{name} ({}): the message does not contain `{}`:\n{stderr}",
                 c.what, c.expect
             ));
+        } else if let Some(line) = c.at_line {
+            let place = format!("{}:{line}: ", c.path.display());
+            if !stderr.contains(&place) {
+                failures.push(format!(
+                    "{name} ({}): the message is not placed at `{place}`:\n{stderr}",
+                    c.what
+                ));
+            }
         }
     }
     assert!(

@@ -178,3 +178,47 @@ fn a_killed_process_under_the_abort_policy_stops_the_run_cleanly_with_the_cause(
     let truth = rec.samples::<ipc_types::Truth>("/F3/truth");
     assert!(truth.last().unwrap().header.sim_time_ns >= 11_000_000_000);
 }
+
+#[test]
+fn a_killed_recorder_loses_about_one_simulated_second() {
+    // The recorder closes a chunk every simulated second: at the paper
+    // run's ~50x real time, a wall-clock period would lose ~50 s of it.
+    let tmp = tempfile::tempdir().unwrap();
+    let text = paper_with(
+        "[[faults]]\naction = \"kill\"\nvehicle = \"run\"\nprocess = \"recorder\"\nat_s = 40.0\n",
+    );
+    let scenario = write_scenario(tmp.path(), "kill-recorder.toml", &text);
+    let out = tmp.path().join("kill-recorder");
+    let o = run_shoal(&[
+        "run",
+        "--quiet",
+        "--duration",
+        "60",
+        "--out",
+        out.to_str().unwrap(),
+        scenario.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("run/recorder") && err.contains("at t = 40.00 s"),
+        "{err}"
+    );
+    let rec_path = out.join("recording.mcap");
+    let fixed = tmp.path().join("fixed.mcap");
+    let o = run_shoal(&[
+        "recover",
+        rec_path.to_str().unwrap(),
+        "--out",
+        fixed.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rec = Recording::open(&fixed).unwrap();
+    let last_ns = rec.messages().iter().map(|m| m.log_time).max().unwrap();
+    let lost_s = 40.0 - last_ns as f64 * 1e-9;
+    assert!(
+        lost_s <= 1.5,
+        "the recording ends at {:.2} s: {lost_s:.2} s of the run before the kill is lost",
+        last_ns as f64 * 1e-9
+    );
+}

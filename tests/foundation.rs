@@ -52,7 +52,7 @@ fn paper_run_records_every_channel_and_the_official_readers_decode_it() {
     assert!(o.status.success());
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(
-        text.contains("/F4/leader_pose") && text.contains("shoal/LeaderPose"),
+        text.contains("/F4/leader_pose") && text.contains("shoal_msgs/msg/LeaderPose"),
         "{text}"
     );
 
@@ -73,6 +73,30 @@ fn paper_run_records_every_channel_and_the_official_readers_decode_it() {
         report["messages"].as_u64().unwrap(),
         rec.messages().len() as u64
     );
+    // A second, independent ROS 2 bag reader (PyPI `rosbags`, its own CDR
+    // decoder): `pkg/msg/Type` names, offered QoS on every channel, and the
+    // `rosbag2` metadata record agreeing with the file.
+    let bag = python()
+        .arg(repo_root().join("tests/python/read_rosbag2.py"))
+        .arg(out.join("recording.mcap"))
+        .output()
+        .unwrap();
+    assert!(
+        bag.status.success(),
+        "rosbags reader failed: {}",
+        String::from_utf8_lossy(&bag.stderr)
+    );
+    let bag: serde_json::Value = serde_json::from_slice(&bag.stdout).unwrap();
+    assert_eq!(
+        bag["messages"].as_u64().unwrap(),
+        rec.messages().len() as u64,
+        "{bag}"
+    );
+    assert!(bag["types"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|t| t == "shoal_msgs/msg/Truth"));
     let truth = rec.samples::<ipc_types::Truth>("/F2/truth");
     let s5 = truth.iter().find(|t| t.header.seq == 5).unwrap();
     let py_pos: Vec<f64> = report["samples"]["/F2/truth"]["position_ned_m"]

@@ -17,7 +17,7 @@ use crate::{schema, Described, FieldDesc, FieldType, Header, Sample, TypeDesc};
 
 sample! {
     /// A 256-byte ping-pong sample of `shoal bench ipc`.
-    pub struct BenchPing256("shoal/BenchPing256", "shoal.BenchPing256.v1", size = 256) {
+    pub struct BenchPing256("shoal_msgs/msg/BenchPing256", "shoal.BenchPing256.v1", size = 256) {
         /// Common header.
         pub header: Header,
         /// Round trip this sample belongs to (the pong echoes the ping's).
@@ -29,7 +29,7 @@ sample! {
 
 sample! {
     /// A 4096-byte ping-pong sample of `shoal bench ipc`.
-    pub struct BenchPing4K("shoal/BenchPing4K", "shoal.BenchPing4K.v1", size = 4096) {
+    pub struct BenchPing4K("shoal_msgs/msg/BenchPing4K", "shoal.BenchPing4K.v1", size = 4096) {
         /// Common header.
         pub header: Header,
         /// Round trip this sample belongs to (the pong echoes the ping's).
@@ -77,7 +77,7 @@ mod tests {
     #[test]
     fn bench_samples_have_schemas_and_are_finite_when_zeroed() {
         let s = schema::ros2msg_schema::<BenchPing4K>().unwrap();
-        assert!(s.starts_with("shoal/Header header\n"));
+        assert!(s.starts_with("shoal_msgs/Header header\n"));
         assert!(s.contains("float64[506] payload"));
         assert!(BenchPing256::zeroed().is_finite());
         let mut p = BenchPing4K::zeroed();

@@ -19,7 +19,7 @@
 //! assert_eq!(Nav::TYPE_NAME, "shoal.Nav.v1");
 //! assert_eq!(service_name("ab12", "F1", Channel::Nav), "shoal/ab12/F1/nav");
 //! let schema = ipc_types::schema::ros2msg_schema::<Nav>().unwrap();
-//! assert!(schema.starts_with("shoal/Header header\n"));
+//! assert!(schema.starts_with("shoal_msgs/Header header\n"));
 //! ```
 
 pub mod schema;
@@ -233,7 +233,7 @@ described! {
     /// every process on the machine, so differences between processes are
     /// latencies. They are the only fields that differ between two lockstep
     /// runs of the same scenario and seed.
-    pub struct Header("shoal/Header", "shoal.Header.v1") {
+    pub struct Header("shoal_msgs/msg/Header", "shoal.Header.v1") {
         /// Per-publisher sequence number, from 0, no gaps unless samples were lost.
         pub seq: u64,
         /// Simulation time of this sample, ns since the run started.
@@ -257,7 +257,7 @@ impl Header {
 sample! {
     /// Ground truth of one vehicle, published by sim-plant. Only sensor
     /// simulators, the world process and the recorder may read it.
-    pub struct Truth("shoal/Truth", "shoal.Truth.v1", size = 232) {
+    pub struct Truth("shoal_msgs/msg/Truth", "shoal.Truth.v1", size = 232) {
         /// Common header.
         pub header: Header,
         /// Position of the centre of origin in NED, m.
@@ -282,7 +282,7 @@ sample! {
 sample! {
     /// What the vehicle's own navigation sensors report (AHRS, DVL, depth;
     /// absolute position only for the leader).
-    pub struct Nav("shoal/Nav", "shoal.Nav.v1", size = 184) {
+    pub struct Nav("shoal_msgs/msg/Nav", "shoal.Nav.v1", size = 184) {
         /// Common header.
         pub header: Header,
         /// Measured attitude body → NED, `[w, x, y, z]`.
@@ -306,7 +306,7 @@ sample! {
 
 sample! {
     /// Generalised thrust command, published by mpc and applied by sim-plant.
-    pub struct Thrust("shoal/Thrust", "shoal.Thrust.v1", size = 96) {
+    pub struct Thrust("shoal_msgs/msg/Thrust", "shoal.Thrust.v1", size = 96) {
         /// Common header.
         pub header: Header,
         /// Forces N (x, y, z) and moments N·m (x, y, z) in body axes, saturated.
@@ -322,7 +322,7 @@ sample! {
 
 described! {
     /// One vehicle's pose inside the world snapshot.
-    pub struct VehiclePose("shoal/VehiclePose", "shoal.VehiclePose.v1") {
+    pub struct VehiclePose("shoal_msgs/msg/VehiclePose", "shoal.VehiclePose.v1") {
         /// Position NED, m.
         pub position_ned_m: [f64; 3],
         /// Attitude body → NED, `[w, x, y, z]`.
@@ -335,7 +335,7 @@ described! {
 sample! {
     /// One fixed-size snapshot of every vehicle's true pose, published by the
     /// world process so sensors read one sample instead of every `truth`.
-    pub struct World("shoal/World", "shoal.World.v1", size = 48 + 80 * MAX_VEHICLES) {
+    pub struct World("shoal_msgs/msg/World", "shoal.World.v1", size = 48 + 80 * MAX_VEHICLES) {
         /// Common header.
         pub header: Header,
         /// Number of vehicles in `vehicles` (scenario order).
@@ -349,7 +349,7 @@ sample! {
 
 sample! {
     /// A rangefinder scan: n ranges with beam angles and validity.
-    pub struct Sonar("shoal/Sonar", "shoal.Sonar.v1", size = 448) {
+    pub struct Sonar("shoal_msgs/msg/Sonar", "shoal.Sonar.v1", size = 448) {
         /// Common header.
         pub header: Header,
         /// Measured range per beam, m; meaningful where `valid` is 1.
@@ -430,7 +430,7 @@ impl SonarScan {
 
 sample! {
     /// Beacon pixels as the follower's camera sees its parent.
-    pub struct Beacons("shoal/Beacons", "shoal.Beacons.v1", size = 184) {
+    pub struct Beacons("shoal_msgs/msg/Beacons", "shoal.Beacons.v1", size = 184) {
         /// Common header.
         pub header: Header,
         /// Pixel coordinates `u0, v0, u1, v1, ...`, px (origin top-left).
@@ -447,7 +447,7 @@ sample! {
 sample! {
     /// The parent's pose in the follower's body frame, solved from beacon
     /// pixels alone (paper eqs. 1-3). Never a wild guess: see `valid`.
-    pub struct LeaderPose("shoal/LeaderPose", "shoal.LeaderPose.v1", size = 424) {
+    pub struct LeaderPose("shoal_msgs/msg/LeaderPose", "shoal.LeaderPose.v1", size = 424) {
         /// Common header.
         pub header: Header,
         /// Parent position in the follower body frame (eq. 3), m.
@@ -475,7 +475,7 @@ sample! {
     /// The target for mpc, in the vehicle's level frame: origin at the vehicle
     /// now, x along the current heading projected on the horizontal, y to
     /// starboard (horizontal), z down.
-    pub struct Setpoint("shoal/Setpoint", "shoal.Setpoint.v1", size = 104) {
+    pub struct Setpoint("shoal_msgs/msg/Setpoint", "shoal.Setpoint.v1", size = 104) {
         /// Common header.
         pub header: Header,
         /// Where the vehicle should be, level frame, m.
@@ -493,7 +493,7 @@ sample! {
 
 sample! {
     /// The planner's internal state, for plots and debugging.
-    pub struct PlannerState("shoal/PlannerState", "shoal.PlannerState.v1", size = 144) {
+    pub struct PlannerState("shoal_msgs/msg/PlannerState", "shoal.PlannerState.v1", size = 144) {
         /// Common header.
         pub header: Header,
         /// Nominal slot in the parent's frame, m.
@@ -521,7 +521,7 @@ sample! {
 
 sample! {
     /// What the predictive controller did this step.
-    pub struct MpcStats("shoal/MpcStats", "shoal.MpcStats.v1", size = 72) {
+    pub struct MpcStats("shoal_msgs/msg/MpcStats", "shoal.MpcStats.v1", size = 72) {
         /// Common header.
         pub header: Header,
         /// Solve wall time, ns.
@@ -539,7 +539,7 @@ sample! {
 
 sample! {
     /// The lockstep clock, published by the orchestrator before each tick.
-    pub struct Clock("shoal/Clock", "shoal.Clock.v1", size = 64) {
+    pub struct Clock("shoal_msgs/msg/Clock", "shoal.Clock.v1", size = 64) {
         /// Common header (`sim_time_ns` is the start of this tick).
         pub header: Header,
         /// Tick number, from 0.
@@ -557,7 +557,7 @@ pub const MAX_HOPS: usize = 12;
 described! {
     /// Publish → take latency of one input channel kind of one process
     /// (every subscription of that kind merged), cumulative since the start.
-    pub struct HopStats("shoal/HopStats", "shoal.HopStats.v1") {
+    pub struct HopStats("shoal_msgs/msg/HopStats", "shoal.HopStats.v1") {
         /// Channel kind (`truth`, `world`, ...), NUL-padded ASCII.
         pub channel: [u8; 24],
         /// Samples taken.
@@ -577,7 +577,7 @@ sample! {
     /// One process's runtime statistics, cumulative since its start, published
     /// on the run's `stats` channel about once a second (simulated time in
     /// lockstep, wall time in realtime) and recorded.
-    pub struct ProcessStats("shoal/ProcessStats", "shoal.ProcessStats.v1", size = 144 + 64 * MAX_HOPS, measured = true) {
+    pub struct ProcessStats("shoal_msgs/msg/ProcessStats", "shoal.ProcessStats.v1", size = 144 + 64 * MAX_HOPS, measured = true) {
         /// Common header.
         pub header: Header,
         /// Vehicle (`run` for run-level processes), NUL-padded ASCII.
@@ -656,7 +656,7 @@ sample! {
     /// orchestrator on the run's `events` channel (with history, so a
     /// restarted recorder still records the death that it was) and recorded
     /// as `/events`; the same events are listed in summary.json.
-    pub struct Event("shoal/Event", "shoal.Event.v1", size = 256) {
+    pub struct Event("shoal_msgs/msg/Event", "shoal.Event.v1", size = 256) {
         /// Common header (`sim_time_ns`: simulated time of the event).
         pub header: Header,
         /// [`EventKind`] code.
@@ -769,7 +769,7 @@ macro_rules! sample_table {
         }
 
         /// Evaluates `$body` with `$T` the sample type whose ros2msg schema
-        /// name is `$schema` (`"shoal/Nav"`), or `$other` if none is.
+        /// name is `$schema` (`"shoal_msgs/msg/Nav"`), or `$other` if none is.
         #[macro_export]
         macro_rules! with_sample_type {
             ($d schema:expr, $d T:ident => $d body:expr, else $d other:expr) => {{
@@ -910,7 +910,7 @@ mod tests {
                 s
             );
         }
-        assert_eq!(with_sample_type!("shoal/Nope", T => 1, else 0), 0);
+        assert_eq!(with_sample_type!("shoal_msgs/msg/Nope", T => 1, else 0), 0);
         let mut n = 0;
         for_each_sample_type!(T => {
             check_layout::<T>();
@@ -925,7 +925,7 @@ mod tests {
             );
         }
         assert_eq!(Channel::Nav.sample_size(), std::mem::size_of::<Nav>());
-        assert_eq!(Channel::MpcStats.schema_name(), "shoal/MpcStats");
+        assert_eq!(Channel::MpcStats.schema_name(), "shoal_msgs/msg/MpcStats");
         assert_eq!(SAMPLE_SCHEMAS.len(), Channel::ALL.len() + 4);
     }
 
@@ -937,7 +937,7 @@ mod tests {
             T::TYPE_NAME
         );
         let text = schema::ros2msg_schema::<T>().unwrap();
-        assert!(text.contains("shoal/Header header"));
+        assert!(text.contains("shoal_msgs/Header header"));
         assert!(!text.contains(" _"), "rust pad names leak into {text}");
     }
 
@@ -992,9 +992,9 @@ mod tests {
     #[test]
     fn nested_types_get_msg_sections() {
         let text = schema::ros2msg_schema::<World>().unwrap();
-        assert!(text.contains("shoal/VehiclePose[256] vehicles"));
-        assert!(text.contains("MSG: shoal/VehiclePose\nfloat64[3] position_ned_m"));
-        assert!(text.contains("MSG: shoal/Header\nuint64 seq"));
+        assert!(text.contains("shoal_msgs/VehiclePose[256] vehicles"));
+        assert!(text.contains("MSG: shoal_msgs/msg/VehiclePose\nfloat64[3] position_ned_m"));
+        assert!(text.contains("MSG: shoal_msgs/msg/Header\nuint64 seq"));
     }
 
     #[test]
@@ -1021,7 +1021,7 @@ mod tests {
     sample! {
         /// Test-only sample mixing f32, integers of every width and nested
         /// arrays, so the generated check is exercised beyond f64 fields.
-        pub struct Mixed("shoal/Mixed", "shoal.Mixed.v1", size = 256) {
+        pub struct Mixed("shoal_msgs/msg/Mixed", "shoal.Mixed.v1", size = 256) {
             /// Common header.
             pub header: Header,
             /// A single f32.

@@ -22,7 +22,7 @@ pub enum TypeDesc {
     },
     /// A nested message type.
     Nested {
-        /// ros2msg name, `shoal/Name`.
+        /// ROS 2 resource name, `shoal_msgs/msg/Name`.
         ros: &'static str,
         /// The nested type's fields.
         fields: fn() -> Vec<FieldDesc>,
@@ -53,7 +53,8 @@ pub trait FieldType {
 
 /// A struct that describes its fields (every sample type and nested type).
 pub trait Described {
-    /// ros2msg type name, `shoal/Name`.
+    /// ROS 2 resource name, `shoal_msgs/msg/Name` (the MCAP schema name
+    /// and the `MSG:` header; fields name it `shoal_msgs/Name`).
     const ROS_NAME: &'static str;
     /// True for a type that measures the machine rather than the simulation
     /// (the runtime statistics): every field after the first (the header)
@@ -120,9 +121,17 @@ fn valid_field_name(name: &str) -> bool {
         && !name.ends_with('_')
 }
 
+/// How a field names a nested type: `pkg/Type`, the `.msg` field form of
+/// the resource name `pkg/msg/Type` (ROS 2 writes the `msg/` only in the
+/// `MSG:` headers and the schema name).
+pub fn field_type_name(resource: &str) -> String {
+    resource.replacen("/msg/", "/", 1)
+}
+
 fn type_line(ty: &TypeDesc) -> String {
     match ty {
-        TypeDesc::Primitive { ros, .. } | TypeDesc::Nested { ros, .. } => (*ros).to_string(),
+        TypeDesc::Primitive { ros, .. } => (*ros).to_string(),
+        TypeDesc::Nested { ros, .. } => field_type_name(ros),
         TypeDesc::Array { elem, len } => format!("{}[{len}]", type_line(elem)),
     }
 }

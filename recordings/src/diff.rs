@@ -97,7 +97,7 @@ mod tests {
         b.thrust_applied_mono_ns = 7;
         assert_eq!(
             first_field_difference(
-                "shoal/Truth",
+                "shoal_msgs/msg/Truth",
                 bytemuck::bytes_of(&a),
                 bytemuck::bytes_of(&b)
             ),
@@ -106,7 +106,7 @@ mod tests {
         b.position_ned_m[1] = 2.5;
         b.velocity_body_mps[0] = 0.6;
         let d = first_field_difference(
-            "shoal/Truth",
+            "shoal_msgs/msg/Truth",
             bytemuck::bytes_of(&a),
             bytemuck::bytes_of(&b),
         )

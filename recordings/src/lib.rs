@@ -23,6 +23,7 @@ mod diff;
 mod reader;
 mod recover;
 mod registry;
+pub mod rosbag2;
 mod scan;
 mod writer;
 

@@ -39,7 +39,7 @@ pub struct ChannelInfo {
     pub id: u16,
     /// Topic, `/<vehicle>/<channel>`.
     pub topic: String,
-    /// Schema name, e.g. `shoal/Nav`.
+    /// Schema name, e.g. `shoal_msgs/msg/Nav`.
     pub schema_name: String,
     /// Message encoding (`cdr`).
     pub encoding: String,

@@ -13,6 +13,7 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
+use crate::rosbag2;
 use crate::scan::{scan, Item};
 
 /// Why a recording could not be recovered.
@@ -183,6 +184,7 @@ fn copy(
         Some("") => None,
         _ => Some(mcap::Compression::Zstd),
     };
+    let ros2 = profile == "ros2";
     let mut writer = mcap::WriteOptions::new()
         .compression(compression)
         .compression_threads(0)
@@ -217,6 +219,11 @@ fn copy(
     // earlier input wrote.
     let mut written_before: HashMap<u16, (u64, u32)> = HashMap::new();
     let mut metadata_names: std::collections::HashSet<String> = Default::default();
+    // The copy's own rosbag2 record: an input's (if any) counts only that
+    // input's messages, and a cut input has none.
+    let mut schema_names: HashMap<u16, String> = HashMap::new();
+    let mut topics: std::collections::BTreeMap<u16, rosbag2::Topic> = Default::default();
+    let mut span: Option<(u64, u64)> = None;
     for (path, bytes) in inputs {
         let mut schema_ids: HashMap<u16, u16> = HashMap::new();
         let mut channel_ids: HashMap<u16, u16> = HashMap::new();
@@ -237,6 +244,7 @@ fn copy(
                                 None => {
                                     let id = writer.add_schema(&s.name, &s.encoding, &s.data)?;
                                     schemas_by_name.insert(s.name.clone(), id);
+                                    schema_names.insert(id, s.name.clone());
                                     report.schemas += 1;
                                     id
                                 }
@@ -261,6 +269,22 @@ fn copy(
                                 )?;
                                 channels_by_topic.insert(c.topic.clone(), id);
                                 report.channels += 1;
+                                topics.insert(
+                                    id,
+                                    rosbag2::Topic {
+                                        name: c.topic.clone(),
+                                        type_name: schema_names
+                                            .get(&schema)
+                                            .cloned()
+                                            .unwrap_or_default(),
+                                        qos: c
+                                            .metadata
+                                            .get(rosbag2::OFFERED_QOS_PROFILES)
+                                            .cloned()
+                                            .unwrap_or_default(),
+                                        messages: 0,
+                                    },
+                                );
                                 id
                             }
                         };
@@ -285,9 +309,19 @@ fn copy(
                             let last = written_now.entry(id).or_insert(key);
                             *last = (*last).max(key);
                             report.messages += 1;
+                            if let Some(t) = topics.get_mut(&id) {
+                                t.messages += 1;
+                            }
+                            span = Some(match span {
+                                None => (m.log_time, m.log_time),
+                                Some((a, b)) => (a.min(m.log_time), b.max(m.log_time)),
+                            });
                         }
                     }
                     Item::Metadata { name, values } => {
+                        if ros2 && name == rosbag2::RECORD_NAME {
+                            return Ok(());
+                        }
                         if metadata_names.insert(name.clone()) {
                             writer.write_metadata(&mcap::records::Metadata {
                                 name,
@@ -326,6 +360,21 @@ fn copy(
             });
         }
         report.chunks += end.chunks;
+    }
+    if ros2 {
+        let (start, end) = span.unwrap_or((0, 0));
+        let file = output
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+        let topics: Vec<rosbag2::Topic> = topics.into_values().collect();
+        writer.write_metadata(&mcap::records::Metadata {
+            name: rosbag2::RECORD_NAME.to_string(),
+            metadata: std::collections::BTreeMap::from([(
+                rosbag2::SERIALIZED_METADATA.to_string(),
+                rosbag2::serialized_metadata(&file, &topics, start, end),
+            )]),
+        })?;
+        report.metadata += 1;
     }
     writer.finish()?;
     drop(writer);

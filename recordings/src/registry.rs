@@ -10,7 +10,7 @@ use ipc_types::Sample;
 pub struct TypeInfo {
     /// iceoryx2 type name, e.g. `shoal.Nav.v1`.
     pub type_name: &'static str,
-    /// ros2msg / MCAP schema name, e.g. `shoal/Nav`.
+    /// ros2msg / MCAP schema name, e.g. `shoal_msgs/msg/Nav`.
     pub schema_name: &'static str,
     /// Size of the raw sample, bytes.
     pub size: usize,

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use ipc_types::Sample;
 
 use crate::registry::type_info;
+use crate::rosbag2;
 
 /// CDR little-endian encapsulation header that precedes every payload.
 pub const CDR_HEADER: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
@@ -30,6 +31,9 @@ pub struct WriterOptions {
     pub compression: Compression,
     /// Target chunk size, bytes (default 1 MiB).
     pub chunk_bytes: u64,
+    /// The keep-last depth each channel's `offered_qos_profiles` states
+    /// (the recorder's buffer per channel; default 1).
+    pub qos_depth: usize,
 }
 
 impl Default for WriterOptions {
@@ -37,6 +41,7 @@ impl Default for WriterOptions {
         Self {
             compression: Compression::Zstd,
             chunk_bytes: 1 << 20,
+            qos_depth: 1,
         }
     }
 }
@@ -67,7 +72,12 @@ pub enum WriterError {
 pub struct RecordingWriter {
     writer: mcap::Writer<BufWriter<File>>,
     schemas: HashMap<&'static str, u16>,
-    channel_sizes: HashMap<u16, usize>,
+    /// Per channel id: the bag's topic, its message count kept current.
+    topics: BTreeMap<u16, rosbag2::Topic>,
+    /// First and last log time written, ns.
+    span: Option<(u64, u64)>,
+    file_name: String,
+    qos: String,
     buf: Vec<u8>,
     messages: u64,
 }
@@ -95,7 +105,12 @@ impl RecordingWriter {
         Ok(Self {
             writer,
             schemas: HashMap::new(),
-            channel_sizes: HashMap::new(),
+            topics: BTreeMap::new(),
+            span: None,
+            file_name: path
+                .file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
+            qos: rosbag2::offered_qos_profiles(opts.qos_depth),
             buf: Vec::with_capacity(32 * 1024),
             messages: 0,
         })
@@ -117,8 +132,17 @@ impl RecordingWriter {
         };
         let mut meta = BTreeMap::new();
         meta.insert("shoal.type_name".to_string(), info.type_name.to_string());
+        meta.insert(rosbag2::OFFERED_QOS_PROFILES.to_string(), self.qos.clone());
         let id = self.writer.add_channel(schema_id, topic, "cdr", &meta)?;
-        self.channel_sizes.insert(id, info.size);
+        self.topics.insert(
+            id,
+            rosbag2::Topic {
+                name: topic.to_string(),
+                type_name: info.schema_name.to_string(),
+                qos: self.qos.clone(),
+                messages: 0,
+            },
+        );
         Ok(id)
     }
 
@@ -140,9 +164,14 @@ impl RecordingWriter {
         seq: u64,
         bytes: &[u8],
     ) -> Result<(), WriterError> {
-        if !self.channel_sizes.contains_key(&channel) {
+        let Some(topic) = self.topics.get_mut(&channel) else {
             return Err(WriterError::UnknownChannel(channel));
-        }
+        };
+        topic.messages += 1;
+        self.span = Some(match self.span {
+            None => (sim_time_ns, sim_time_ns),
+            Some((a, b)) => (a.min(sim_time_ns), b.max(sim_time_ns)),
+        });
         self.buf.clear();
         self.buf.extend_from_slice(&CDR_HEADER);
         self.buf.extend_from_slice(bytes);
@@ -182,8 +211,16 @@ impl RecordingWriter {
         Ok(())
     }
 
-    /// Writes the summary and index and closes the file.
+    /// Writes the `rosbag2` metadata record, the summary and index, and
+    /// closes the file.
     pub fn finish(mut self) -> Result<u64, WriterError> {
+        let topics: Vec<rosbag2::Topic> = std::mem::take(&mut self.topics).into_values().collect();
+        let (start, end) = self.span.unwrap_or((0, 0));
+        let yaml = rosbag2::serialized_metadata(&self.file_name, &topics, start, end);
+        self.metadata(
+            rosbag2::RECORD_NAME,
+            BTreeMap::from([(rosbag2::SERIALIZED_METADATA.to_string(), yaml)]),
+        )?;
         self.writer.finish()?;
         Ok(self.messages)
     }

@@ -103,6 +103,7 @@ fn make_recording(compression: Compression) -> Vec<u8> {
     let opts = WriterOptions {
         compression,
         chunk_bytes: 4096,
+        ..WriterOptions::default()
     };
     let mut w = RecordingWriter::create(&path, &opts).unwrap();
     let nav = w.add_channel::<ipc_types::Nav>("/L/nav").unwrap();

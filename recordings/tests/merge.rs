@@ -10,6 +10,7 @@ fn part(path: &std::path::Path, from: u64, to: u64, finish: bool, meta: &str) {
     let opts = WriterOptions {
         compression: Compression::Zstd,
         chunk_bytes: 4096,
+        ..WriterOptions::default()
     };
     let mut w = RecordingWriter::create(path, &opts).unwrap();
     let truth = w.add_channel::<ipc_types::Truth>("/L/truth").unwrap();
@@ -53,7 +54,10 @@ fn parts_join_in_order_with_the_overlap_written_once() {
     assert!(report.input_truncated);
     assert_eq!(report.channels, 2);
     assert_eq!(report.schemas, 2);
-    assert_eq!(report.metadata, 1, "one shoal.run record (the first)");
+    assert_eq!(
+        report.metadata, 2,
+        "one shoal.run record (the first) and the copy's own rosbag2 record"
+    );
     let rec = Recording::open(&out).unwrap();
     assert!(!rec.truncated());
     let truths = rec.samples::<ipc_types::Truth>("/L/truth");
@@ -61,6 +65,13 @@ fn parts_join_in_order_with_the_overlap_written_once() {
     assert_eq!(seqs, (0..600).collect::<Vec<_>>());
     assert_eq!(rec.samples::<ipc_types::Event>("/events").len(), 1);
     assert_eq!(rec.metadata()["shoal.run"]["part"], "first");
+    // The rosbag2 record counts the copy, not the finished part alone.
+    let bag = &rec.metadata()["rosbag2"]["serialized_metadata"];
+    assert!(bag.contains("  message_count: 601\n"), "{bag}");
+    assert!(
+        bag.contains("name: \"/L/truth\"\n        type: \"shoal_msgs/msg/Truth\""),
+        "{bag}"
+    );
     // Nothing is overwritten.
     assert!(merge(&[&a, &b], &out).is_err());
 }

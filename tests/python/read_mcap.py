@@ -32,7 +32,7 @@ def main(path):
                         v = getattr(decoded, field)
                         sample[field] = list(v) if not isinstance(v, (int, float)) else v
                 first[channel.topic] = sample
-            if schema.name == "shoal/Truth":
+            if schema.name == "shoal_msgs/msg/Truth":
                 q = decoded.q_body_to_ned_wxyz
                 n = math.sqrt(sum(x * x for x in q))
                 if abs(n - 1.0) > 1e-6:

@@ -34,7 +34,13 @@ pub fn parse_duration(s: &str) -> Result<f64, String> {
 
 /// Leader–follower AUV formations as multi-process soft-real-time software.
 #[derive(Debug, Parser)]
-#[command(name = "shoal", version, about, long_about = None)]
+#[command(
+    name = "shoal",
+    version,
+    about,
+    long_about = None,
+    after_help = "Environment:\n  RUST_LOG   what every process logs: a level (error, warn, info [default], debug, trace)\n             or per-target filters, e.g. RUST_LOG=debug or RUST_LOG=info,shoal_planner=debug;\n             the children of a run inherit it (their logs are in DIR/logs/).\n  NO_COLOR   set to plain text; colour is used only when stderr is a terminal."
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,

@@ -74,8 +74,13 @@ pub struct RunOutcome {
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
     /// A child died while the run needed it.
-    #[error("process {} ended unexpectedly ({}); last lines of its log:\n{}", .0.label, .0.exit.describe(), .0.log_tail)]
-    ChildDied(Death),
+    #[error("process {} ended unexpectedly at t = {sim_time_s:.2} s ({}); last lines of its log:\n{}", .death.label, .death.exit.describe(), .death.log_tail)]
+    ChildDied {
+        /// Who died, how, and its log's end.
+        death: Death,
+        /// Simulated time of the tick it died in, s.
+        sim_time_s: f64,
+    },
     /// Processes did not finish a step in time.
     #[error(
         "no progress for {timeout_s:.0} s at t = {sim_time_s:.2} s: still waiting for {waiting:?}"
@@ -567,7 +572,10 @@ impl Ports {
     ) -> Result<(), RunError> {
         self.recovery
             .on_death(d, procs, sup, &self.node, &mut self.journal, t_s)
-            .map_err(RunError::ChildDied)
+            .map_err(|death| RunError::ChildDied {
+                death,
+                sim_time_s: t_s,
+            })
     }
 }
 

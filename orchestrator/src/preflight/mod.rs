@@ -20,14 +20,79 @@ use shoal_scenario::{Perception, Scenario};
 // The scenario crate cannot see ipc-types; the two limits must agree.
 const _: () = assert!(shoal_scenario::MAX_VEHICLES == ipc_types::MAX_VEHICLES);
 
-/// The scenario at `path`, or the embedded paper scenario.
+/// The scenario at `path`, or the embedded paper scenario. A file is
+/// checked whole here ([`resolve`], on a copy), so that every error, in a
+/// service's section as much as at the top, is placed in the file:
+/// `FILE:LINE: KEY: reason`.
 pub fn load_scenario(path: &Option<std::path::PathBuf>) -> anyhow::Result<Scenario> {
-    match path {
-        Some(p) => {
-            Scenario::from_file(p).with_context(|| format!("scenario {} refused", p.display()))
-        }
-        None => Scenario::paper().context("the embedded paper scenario is invalid"),
+    let Some(p) = path else {
+        return Scenario::paper().context("the embedded paper scenario is invalid");
+    };
+    let s = Scenario::from_file(p)?;
+    let file = p.display().to_string();
+    let text =
+        std::fs::read_to_string(p).map_err(|e| anyhow::anyhow!("cannot read {file}: {e}"))?;
+    let mut probe = s.clone();
+    match resolve(&mut probe) {
+        Ok(()) => Ok(s),
+        Err(e) => Err(place_error(e, &file, &text)),
     }
+}
+
+/// An error of [`resolve`] placed in the scenario file: a
+/// [`shoal_scenario::ScenarioError`] by its key; any other by the first
+/// dotted key its message starts with (`plant: vehicle.mass_kg: …` is
+/// `plant.vehicle.mass_kg`), when that key is written in the file.
+fn place_error(e: anyhow::Error, file: &str, text: &str) -> anyhow::Error {
+    if let Some(se) = e.downcast_ref::<shoal_scenario::ScenarioError>() {
+        return se.clone().located(file, text).into();
+    }
+    let msg = format!("{e:#}");
+    let is_key = |t: &str| {
+        !t.is_empty()
+            && t.chars()
+                .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || "_.[]".contains(c))
+    };
+    // `section: key reason` or `section: key: reason`: the first word of
+    // each of the first two parts, tried as a key alone and joined.
+    let mut rest = msg.as_str();
+    let mut words = Vec::new();
+    for _ in 0..2 {
+        let word = rest.split([' ', ':']).next().unwrap_or("");
+        if !is_key(word) {
+            break;
+        }
+        rest = rest[word.len()..].trim_start_matches(':').trim_start();
+        words.push((word, rest));
+    }
+    // (key, the reason after it, whether its table's line will do).
+    let mut candidates = Vec::new();
+    if let [(w0, _), (w1, after)] = words[..] {
+        if w1.contains('.') {
+            candidates.push((w1.to_string(), after, false));
+        }
+        candidates.push((format!("{w0}.{w1}"), after, false));
+    }
+    if let Some(&(w0, after)) = words.first() {
+        candidates.push((w0.to_string(), after, true));
+    }
+    for (key, reason, table_will_do) in candidates {
+        let line = if table_will_do {
+            shoal_scenario::line_of(text, &key)
+        } else {
+            shoal_scenario::line_of_exact(text, &key)
+        };
+        if let Some(line) = line {
+            return shoal_scenario::ScenarioError::At {
+                file: file.to_string(),
+                line: Some(line),
+                key: Some(key),
+                reason: reason.to_string(),
+            }
+            .into();
+        }
+    }
+    e.context(format!("{file}: scenario refused"))
 }
 
 /// Validates the whole scenario and fills in every follower's D_a and D_b

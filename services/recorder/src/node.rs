@@ -74,12 +74,16 @@ impl<T: Sample> Tap for TypedTap<T> {
     }
 }
 
+/// Simulated time between chunk flushes, ns.
+pub const FLUSH_PERIOD_SIM_NS: u64 = 1_000_000_000;
+
 pub struct RecorderTask {
     writer: Option<RecordingWriter>,
     taps: Vec<Box<dyn Tap>>,
     arena: Vec<u8>,
     batch: Vec<Pending>,
-    last_flush_mono_ns: u64,
+    /// Simulation time of the last chunk flushed, ns.
+    last_flush_sim_ns: u64,
 }
 
 fn open_tap<T: Sample>(
@@ -109,6 +113,7 @@ impl RecorderTask {
                 shoal_scenario::Compression::None => Compression::None,
             },
             chunk_bytes: scenario.recording.chunk_kib * 1024,
+            qos_depth: scenario.recording.buffer,
         };
         let mut writer = RecordingWriter::create(out, &opts)?;
         let mut meta = BTreeMap::new();
@@ -175,7 +180,7 @@ impl RecorderTask {
             taps,
             arena: Vec::with_capacity(1 << 20),
             batch: Vec::with_capacity(4096),
-            last_flush_mono_ns: shoal_runtime::mono_ns(),
+            last_flush_sim_ns: 0,
         })
     }
 
@@ -201,13 +206,16 @@ impl RecorderTask {
                 )
                 .map_err(TaskError::failed("recording write"))?;
         }
-        // Close a chunk about once a second so a killed run loses little.
-        let now = shoal_runtime::mono_ns();
-        if now.saturating_sub(self.last_flush_mono_ns) > 1_000_000_000 {
-            writer
-                .flush()
-                .map_err(TaskError::failed("recording flush"))?;
-            self.last_flush_mono_ns = now;
+        // Close a chunk each simulated second, so a recorder that dies loses
+        // about a second of the run at any speed (a wall-clock period would
+        // lose a minute of a run at 60x real time).
+        if let Some(last) = self.batch.last() {
+            if last.sim_time_ns >= self.last_flush_sim_ns + FLUSH_PERIOD_SIM_NS {
+                writer
+                    .flush()
+                    .map_err(TaskError::failed("recording flush"))?;
+                self.last_flush_sim_ns = last.sim_time_ns;
+            }
         }
         Ok(())
     }

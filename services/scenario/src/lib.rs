@@ -40,9 +40,18 @@ pub const PAPER_TOML: &str = include_str!("../../../scenarios/paper.toml");
 /// Why a scenario is refused. Each message names the key.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ScenarioError {
-    /// TOML syntax error or a key the schema does not know.
+    /// An error that names nothing in a file (serialising, a missing
+    /// embedded scenario).
     #[error("{0}")]
     Parse(String),
+    /// The scenario file could not be read.
+    #[error("cannot read {path}: {reason}")]
+    Read {
+        /// The file.
+        path: String,
+        /// The system's reason.
+        reason: String,
+    },
     /// A value out of range or inconsistent; `key` names it.
     #[error("{key}: {reason}")]
     Invalid {
@@ -51,6 +60,142 @@ pub enum ScenarioError {
         /// What is wrong with it.
         reason: String,
     },
+    /// An error placed in the file, as a compiler places one:
+    /// `scenario.toml:12: follower.memory_behnd_m: unknown key; did you
+    /// mean `memory_behind_m`?`.
+    #[error("{}", place(file, *line, key.as_deref(), reason))]
+    At {
+        /// The file (empty for text that came from no file).
+        file: String,
+        /// 1-based line, when one can be named.
+        line: Option<usize>,
+        /// The dotted key, when one can be named.
+        key: Option<String>,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+fn place(file: &str, line: Option<usize>, key: Option<&str>, reason: &str) -> String {
+    let mut out = match (file.is_empty(), line) {
+        (false, Some(l)) => format!("{file}:{l}: "),
+        (false, None) => format!("{file}: "),
+        (true, Some(l)) => format!("line {l}: "),
+        (true, None) => String::new(),
+    };
+    if let Some(k) = key {
+        out.push_str(k);
+        out.push_str(": ");
+    }
+    out.push_str(reason);
+    out
+}
+
+impl ScenarioError {
+    /// The error placed in `file`, whose text is `text`: the line of the key
+    /// it names is found, and the file is named.
+    #[must_use]
+    pub fn located(self, file: &str, text: &str) -> Self {
+        match self {
+            Self::Invalid { key, reason } => Self::At {
+                file: file.to_string(),
+                line: line_of(text, &key),
+                key: Some(key),
+                reason,
+            },
+            Self::At {
+                line, key, reason, ..
+            } => Self::At {
+                file: file.to_string(),
+                line: line.or_else(|| key.as_deref().and_then(|k| line_of(text, k))),
+                key,
+                reason,
+            },
+            other => other,
+        }
+    }
+}
+
+/// The reason of serde's "unknown field `x`, expected one of `a`, `b`" as
+/// a person wants it: the nearest known key (Jaro-Winkler similarity of at
+/// least 0.8, from `strsim`) as "did you mean", else the known keys, a few
+/// per line. Other messages pass through.
+pub fn explain_unknown_key(msg: &str) -> String {
+    let Some(rest) = msg
+        .strip_prefix("unknown field `")
+        .or_else(|| msg.strip_prefix("unknown variant `"))
+    else {
+        return msg.to_string();
+    };
+    let what = if msg.starts_with("unknown variant") {
+        "value"
+    } else {
+        "key"
+    };
+    let Some((name, tail)) = rest.split_once('`') else {
+        return msg.to_string();
+    };
+    let known: Vec<&str> = tail
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .filter(|k| !k.is_empty())
+        .collect();
+    let best = known
+        .iter()
+        .map(|k| (strsim::jaro_winkler(name, k), *k))
+        .max_by(|a, b| a.0.total_cmp(&b.0));
+    match best {
+        Some((score, k)) if score >= 0.8 => {
+            format!("unknown {what} `{name}`; did you mean `{k}`?")
+        }
+        Some(_) => {
+            let mut text = format!("unknown {what} `{name}`; the known ones are:");
+            for group in known.chunks(6) {
+                text.push_str("\n    ");
+                text.push_str(&group.join(", "));
+            }
+            text
+        }
+        None => format!("unknown {what} `{name}`; none is allowed here"),
+    }
+}
+
+/// The 1-based line of the key at dotted path `key` (`vehicles[1].slot_m`,
+/// `follower.memory_m`, or a table such as `obstacles[2]`), as
+/// [`key_at`] names keys; for a key that is not written in the file (a
+/// missing one), the line of its table.
+pub fn line_of(text: &str, key: &str) -> Option<usize> {
+    lines_of(text, key).map(|(exact, table)| exact.unwrap_or(table))
+}
+
+/// The 1-based line where the key at dotted path `key` is written; `None`
+/// when it is not (no fallback to its table).
+pub fn line_of_exact(text: &str, key: &str) -> Option<usize> {
+    lines_of(text, key).and_then(|(exact, _)| exact)
+}
+
+/// (the key's own line, the line of the nearest table above it).
+fn lines_of(text: &str, key: &str) -> Option<(Option<usize>, usize)> {
+    let mut pos = 0usize;
+    let mut table_line = None;
+    for (n, line) in text.split_inclusive('\n').enumerate() {
+        let indent = line.len() - line.trim_start().len();
+        let t = line.trim();
+        if !t.is_empty() && !t.starts_with('#') {
+            if let Some(k) = key_at(text, Some(pos + indent)) {
+                if k == key {
+                    return Some((Some(n + 1), table_line.unwrap_or(n + 1)));
+                }
+                let is_header = t.starts_with('[');
+                if is_header && key.starts_with(&format!("{k}.")) {
+                    table_line = Some(n + 1);
+                }
+            }
+        }
+        pos += line.len();
+    }
+    table_line.map(|t| (None, t))
 }
 
 /// A number as a person reads it: `7`, `0.5`, `5e-324` (not 324 zeros).
@@ -987,9 +1132,12 @@ fn from_table<T: serde::de::DeserializeOwned>(
             key_at(&text, at)
         }
     };
-    toml::from_str(&text).map_err(|e| match found(&e) {
-        Some(k) => invalid(format!("{section}.{k}"), e.message().trim().to_string()),
-        None => invalid(section, e.message().trim().to_string()),
+    toml::from_str(&text).map_err(|e| {
+        let reason = explain_unknown_key(e.message().trim());
+        match found(&e) {
+            Some(k) => invalid(format!("{section}.{k}"), reason),
+            None => invalid(section, reason),
+        }
     })
 }
 
@@ -1019,12 +1167,12 @@ fn parse_error(prefix: &str, text: &str, e: &toml::de::Error) -> ScenarioError {
             format!("{prefix}.{k}")
         }
     });
-    ScenarioError::Parse(match (key, line) {
-        (Some(k), Some(l)) => format!("{k}: {msg} (line {l})"),
-        (None, Some(l)) => format!("line {l}: {msg}"),
-        (Some(k), None) => format!("{k}: {msg}"),
-        (None, None) => msg.to_string(),
-    })
+    ScenarioError::At {
+        file: String::new(),
+        line,
+        key,
+        reason: explain_unknown_key(msg),
+    }
 }
 
 /// The dotted path of the key at byte `offset` of a TOML document, found
@@ -1104,10 +1252,14 @@ fn clean_key(k: &str) -> String {
 
 impl Scenario {
     /// Reads and validates a scenario file.
+    /// Every error is placed in the file ([`ScenarioError::located`]).
     pub fn from_file(path: &std::path::Path) -> Result<Self, ScenarioError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| ScenarioError::Parse(format!("cannot read {}: {e}", path.display())))?;
-        Self::from_toml(&text)
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read {
+            path: file.clone(),
+            reason: e.to_string(),
+        })?;
+        Self::from_toml(&text).map_err(|e| e.located(&file, &text))
     }
 }
 
@@ -1115,6 +1267,55 @@ impl Scenario {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn an_unknown_key_gets_the_nearest_known_one_or_the_list() {
+        let near = explain_unknown_key(
+            "unknown field `memory_behnd_m`, expected one of `memory_behind_m`, `memory_max_age_s`",
+        );
+        assert_eq!(
+            near,
+            "unknown key `memory_behnd_m`; did you mean `memory_behind_m`?"
+        );
+        let far = explain_unknown_key(
+            "unknown field `lidar_hz`, expected one of `tick_s`, `plant_hz`, `a`, `b`, `c`, `d`, `e`",
+        );
+        assert!(
+            far.starts_with("unknown key `lidar_hz`; the known ones are:\n    tick_s, plant_hz")
+        );
+        assert_eq!(far.lines().count(), 3, "six per line: {far}");
+        assert_eq!(
+            explain_unknown_key("unknown variant `gzip`, expected one of `zstd`, `lz4`, `none`")
+                .lines()
+                .next(),
+            Some("unknown value `gzip`; the known ones are:")
+        );
+        assert_eq!(explain_unknown_key("duplicate key"), "duplicate key");
+    }
+
+    #[test]
+    fn a_key_is_found_on_its_line_and_a_missing_one_on_its_tables() {
+        let text = "name = \"t\"\n\n[[vehicles]]\nname = \"L\"\n[[vehicles]]\n  parent = \"L\"\n[follower]\n# memory_m = 1\nmemory_m = 2\n";
+        assert_eq!(line_of(text, "name"), Some(1));
+        assert_eq!(line_of(text, "vehicles[1].parent"), Some(6));
+        assert_eq!(line_of(text, "follower.memory_m"), Some(9));
+        assert_eq!(line_of(text, "follower.other"), Some(7));
+        assert_eq!(line_of_exact(text, "follower.other"), None);
+        assert_eq!(line_of(text, "nowhere"), None);
+        let e = invalid("vehicles[1].parent", "bad").located("s.toml", text);
+        assert_eq!(e.to_string(), "s.toml:6: vehicles[1].parent: bad");
+    }
+
+    #[test]
+    fn a_file_that_is_not_there_is_said_once() {
+        let e = Scenario::from_file(std::path::Path::new("/nonexistent/x.toml")).unwrap_err();
+        let text = e.to_string();
+        assert_eq!(text.matches("cannot read").count(), 1, "{text}");
+        assert!(
+            text.starts_with("cannot read /nonexistent/x.toml: "),
+            "{text}"
+        );
+    }
 
     const BASE: &str = r#"
 name = "t"
