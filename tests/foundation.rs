@@ -171,6 +171,49 @@ fn two_lockstep_runs_with_the_same_seed_give_the_same_messages() {
         hashes[0], hashes[2],
         "a different seed must change the noisy sensors"
     );
+
+    // The recording keeps the effective scenario (every section with its
+    // defaults) and the run's wall-clock start; the effective text is what
+    // `shoal check --resolved` prints, and run again it gives the same
+    // messages.
+    let rec = Recording::open(&tmp.path().join("r0/recording.mcap")).unwrap();
+    let meta = &rec.metadata()["shoal.run"];
+    let effective = &meta["effective_toml"];
+    let parsed: toml::Table = toml::from_str(effective).unwrap();
+    assert_eq!(parsed["camera"]["width_px"].as_integer(), Some(512));
+    assert!(parsed["camera"].get("mount_position_body_m").is_some());
+    assert!(parsed["beacons"].get("positions_body_m").is_some());
+    assert!(parsed["pose"].as_table().is_some_and(|t| !t.is_empty()));
+    assert_eq!(parsed["seed"].as_integer(), Some(7));
+    let start: u64 = meta["start_unix_ns"].parse().unwrap();
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as u64;
+    assert!(
+        start < now && now - start < 3_600_000_000_000,
+        "start_unix_ns {start}"
+    );
+    let eff = write_scenario(tmp.path(), "effective.toml", effective);
+    let o = run_shoal(&["check", "--resolved", eff.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(String::from_utf8_lossy(&o.stdout), *effective);
+    let out = tmp.path().join("again");
+    let o = run_shoal(&[
+        "run",
+        "--quiet",
+        eff.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let again = Recording::open(&out.join("recording.mcap"))
+        .unwrap()
+        .message_hashes();
+    assert!(
+        again == hashes[0],
+        "the effective scenario runs differently from the one it came from"
+    );
 }
 
 #[test]

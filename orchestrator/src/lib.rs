@@ -29,4 +29,5 @@ pub mod launch;
 pub mod pipeline;
 pub mod plots;
 pub mod preflight;
+pub mod progress;
 pub mod replay;

@@ -5,10 +5,15 @@ use std::path::PathBuf;
 use crate::preflight;
 
 /// Resolves the scenario at `path` (default: the paper's) and prints each
-/// follower's slot and D_a/D_b, with any advice.
-pub fn run(path: Option<PathBuf>) -> anyhow::Result<()> {
+/// follower's slot and D_a/D_b, with any advice; with `resolved`, the
+/// effective scenario as TOML instead.
+pub fn run(path: Option<PathBuf>, resolved: bool) -> anyhow::Result<()> {
     let mut s = preflight::load_scenario(&path)?;
     preflight::resolve(&mut s)?;
+    if resolved {
+        print!("{}", preflight::effective_toml(&s)?);
+        return Ok(());
+    }
     println!(
         "{}: ok ({} vehicles, {} processes)",
         s.name,

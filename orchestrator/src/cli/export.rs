@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::export::{export_to_file, ExportReport};
+use crate::export::{export_to_file, ExportOptions, ExportReport};
 
 /// Arguments of `shoal export`.
 #[derive(Debug, clap::Args)]
@@ -17,7 +17,9 @@ Channels written (Foxglove JSON, official schemas embedded):
   /scene/line_of_sight   foxglove.SceneUpdate      camera -> parent's beacons, green seen / red not
   /<V>/pose              foxglove.PoseInFrame      true pose, in ned
   /<F>/parent_estimate   foxglove.PoseInFrame      the parent as the camera estimated it
-Times are the recording's simulation time (the view starts at 1970-01-01 00:00:00).")]
+Times are the recording's simulation time, so the view starts at 1970-01-01 00:00:00;
+--epoch adds the run's wall-clock start (kept in the recording) and viewers show the date.
+A file shoal did not write is refused.")]
 pub struct ExportCmd {
     /// The shoal recording (MCAP), e.g. runs/paper-<time>/recording.mcap.
     pub recording: PathBuf,
@@ -30,6 +32,10 @@ pub struct ExportCmd {
     /// Replace OUT if it exists (it is refused otherwise).
     #[arg(long)]
     pub force: bool,
+    /// Shift every time by the run's wall-clock start, so that viewers show
+    /// the real date and time of day (default: simulated time from 0).
+    #[arg(long)]
+    pub epoch: bool,
     /// No progress bar and no closing table.
     #[arg(long, short)]
     pub quiet: bool,
@@ -38,7 +44,12 @@ pub struct ExportCmd {
 /// Runs `shoal export`.
 pub fn run(cmd: ExportCmd) -> anyhow::Result<()> {
     let out = &cmd.foxglove;
-    let report = export_to_file(&cmd.recording, out, cmd.force, !cmd.quiet)?;
+    let opts = ExportOptions {
+        force: cmd.force,
+        progress: !cmd.quiet,
+        epoch: cmd.epoch,
+    };
+    let report = export_to_file(&cmd.recording, out, opts)?;
     for n in &report.notes {
         tracing::warn!("{n}");
     }

@@ -55,6 +55,11 @@ enum Cmd {
     Check {
         /// Scenario TOML (default: the embedded paper scenario).
         scenario: Option<PathBuf>,
+        /// Print the scenario as every process runs it instead: every
+        /// section with its defaults, D_a/D_b assigned (what a recording
+        /// keeps as `shoal.run` / `effective_toml`).
+        #[arg(long)]
+        resolved: bool,
     },
     /// Run the method, the paper's method as published, the acoustic-modem
     /// baseline and the no-vertical-shift ablation side by side; write
@@ -83,7 +88,8 @@ enum Cmd {
     /// Write a complete, indexed copy of a truncated recording.
     Recover(recover::RecoverCmd),
     /// Play a recording back onto iceoryx2, or re-run one process on its
-    /// recorded inputs and report the first output that differs.
+    /// recorded inputs and report the first output that differs (exit
+    /// status 3 when one does).
     Replay(replay::ReplayCmd),
     /// Benchmarks that print figures.
     #[command(subcommand)]
@@ -111,7 +117,7 @@ pub fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.cmd {
         Cmd::Run(cmd) => run::run(cmd),
-        Cmd::Check { scenario } => check::run(scenario),
+        Cmd::Check { scenario, resolved } => check::run(scenario, resolved),
         Cmd::Inspect {
             recording,
             json,
@@ -166,5 +172,36 @@ mod tests {
             let args = [&["shoal"], cmd, &["--duration", "2.5"]].concat();
             assert!(Cli::try_parse_from(args).is_ok(), "{cmd:?}");
         }
+    }
+
+    #[test]
+    fn rerun_only_options_are_refused_without_rerun() {
+        for extra in [
+            ["--set", "follower.beta=0.2"].as_slice(),
+            &["--vehicle", "F1"],
+            &["--json"],
+        ] {
+            let args = [&["shoal", "replay", "r.mcap"], extra].concat();
+            let err = Cli::try_parse_from(args).unwrap_err().to_string();
+            assert!(err.contains("--rerun"), "{extra:?}: {err}");
+            let args = [&["shoal", "replay", "r.mcap", "--rerun", "mpc"], extra].concat();
+            assert!(Cli::try_parse_from(args).is_ok(), "{extra:?}");
+        }
+    }
+
+    #[test]
+    fn the_help_names_every_command_and_the_environment() {
+        use clap::CommandFactory as _;
+        let help = Cli::command().render_long_help().to_string();
+        for name in [
+            "run", "check", "compare", "inspect", "gen", "campaign", "export", "recover", "replay",
+            "bench",
+        ] {
+            assert!(help.contains(&format!("  {name}")), "{name}: {help}");
+        }
+        assert!(
+            help.contains("RUST_LOG") && help.contains("NO_COLOR"),
+            "{help}"
+        );
     }
 }

@@ -4,7 +4,6 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use recordings::Recording;
 
 use crate::replay::{play, rerun, PlayOptions, RerunOptions};
@@ -30,24 +29,27 @@ pub struct ReplayCmd {
     #[arg(long)]
     pub rerun: Option<String>,
     /// The vehicle whose process is re-run (not needed for `world`).
-    #[arg(long)]
+    #[arg(long, requires = "rerun")]
     pub vehicle: Option<String>,
     /// Override a scenario key for the re-run, `section.key=value` in TOML
-    /// (e.g. `follower.beta=0.2`); repeatable.
-    #[arg(long = "set")]
+    /// (e.g. `follower.beta=0.2`); repeatable; only with --rerun (playback
+    /// sends what was recorded).
+    #[arg(long = "set", requires = "rerun")]
     pub set: Vec<String>,
     /// Directory holding the service binaries (default: next to `shoal`).
     #[arg(long)]
     pub bin_dir: Option<PathBuf>,
     /// Print the re-run's report as JSON.
-    #[arg(long)]
+    #[arg(long, requires = "rerun")]
     pub json: bool,
+    /// No progress bar while playing.
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
 /// Runs `shoal replay`.
 pub fn run(cmd: ReplayCmd) -> anyhow::Result<()> {
-    let rec = Recording::open(&cmd.recording)
-        .with_context(|| format!("cannot read {}", cmd.recording.display()))?;
+    let rec = Recording::open(&cmd.recording)?;
     if rec.truncated() {
         tracing::warn!("the recording is truncated; replaying what it holds");
     }
@@ -76,6 +78,7 @@ pub fn run(cmd: ReplayCmd) -> anyhow::Result<()> {
                 speed: cmd.speed,
                 run_id: cmd.run_id,
                 wait_subscribers: cmd.wait_subscribers,
+                progress: !cmd.quiet,
             },
         ),
     }

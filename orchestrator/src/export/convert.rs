@@ -8,10 +8,11 @@ pub(super) fn export_foxglove<W: std::io::Write + std::io::Seek>(
     rec: &recordings::Recording,
     w: W,
     progress: bool,
+    epoch_ns: u64,
 ) -> anyhow::Result<ExportReport> {
     let mut notes = Vec::new();
     let cfg = ViewConfig::from_recording(rec, &mut notes);
-    let out = FoxgloveWriter::new(w)?;
+    let out = FoxgloveWriter::new(w, epoch_ns)?;
 
     // Per input channel: (vehicle, channel) for the ones the view uses.
     let routes: HashMap<u16, (String, Channel)> = rec
@@ -41,7 +42,7 @@ pub(super) fn export_foxglove<W: std::io::Write + std::io::Seek>(
         skipped: 0,
     };
     conv.static_scene(order.first().map(|i| msgs[*i].log_time).unwrap_or(0))?;
-    let bar = progress_bar(progress, order.len() as u64);
+    let bar = crate::progress::bar(progress, order.len() as u64, "messages");
     for (n, i) in order.iter().enumerate() {
         if n % 4096 == 0 {
             bar.set_position(n as u64);
@@ -85,9 +86,15 @@ enum Done {
 }
 
 impl<W: std::io::Write + std::io::Seek> Converter<W> {
+    /// A message's own timestamp for simulated time `ns`: shifted as the
+    /// log times are.
+    fn time(&self, ns: u64) -> Time {
+        Time::from_ns(ns + self.out.epoch_ns)
+    }
+
     /// The static scene (obstacles, vehicle models), at time `t0`.
     fn static_scene(&mut self, t0: u64) -> anyhow::Result<()> {
-        let ts0 = Time::from_ns(t0);
+        let ts0 = self.time(t0);
         if !self.cfg.obstacles.is_empty() {
             let update = SceneUpdate {
                 deletions: Vec::new(),
@@ -177,7 +184,7 @@ impl<W: std::io::Write + std::io::Seek> Converter<W> {
             return Ok(Done::Used);
         };
         let t = s.header.sim_time_ns;
-        let ts = Time::from_ns(t);
+        let ts = self.time(t);
         if self.tf_time.is_none() {
             self.tf_time = Some(log_time);
             self.tf.transforms.push(frames::world_to_ned_transform(ts));
@@ -228,7 +235,7 @@ impl<W: std::io::Write + std::io::Seek> Converter<W> {
             mount_body_m: self.cfg.sonar.mount_position_body_m,
             range_max_m: self.cfg.sonar.range_max_m,
         };
-        let t = Time::from_ns(s.header.origin_sim_time_ns);
+        let t = self.time(s.header.origin_sim_time_ns);
         let update = SceneUpdate {
             deletions: Vec::new(),
             entities: vec![scene::sonar_entity(t, vehicle, &scan)],
@@ -261,7 +268,7 @@ impl<W: std::io::Write + std::io::Seek> Converter<W> {
         let update = SceneUpdate {
             deletions: Vec::new(),
             entities: vec![scene::line_of_sight_entity(
-                Time::from_ns(t),
+                self.time(t),
                 vehicle,
                 &parent,
                 &camera,
@@ -297,7 +304,7 @@ impl<W: std::io::Write + std::io::Seek> Converter<W> {
         let update = SceneUpdate {
             deletions: Vec::new(),
             entities: vec![scene::slot_entity(
-                Time::from_ns(t),
+                self.time(t),
                 vehicle,
                 &parent,
                 &slot,
@@ -324,7 +331,7 @@ impl<W: std::io::Write + std::io::Seek> Converter<W> {
             &format!("/{vehicle}/parent_estimate"),
             log_time,
             &PoseInFrame {
-                timestamp: Time::from_ns(s.header.origin_sim_time_ns),
+                timestamp: self.time(s.header.origin_sim_time_ns),
                 frame_id: body_frame(vehicle),
                 pose: Pose {
                     position: foxglove::Vector3::from_array(s.parent_position_body_m),

@@ -41,7 +41,7 @@ mod scene;
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
-use std::io::{BufWriter, IsTerminal};
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -55,16 +55,58 @@ use scene::{ScanView, SlotView, TruePose, VehicleLook};
 
 use crate::analysis::track::{unit_wxyz, Track};
 
+/// How an export is written.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ExportOptions {
+    /// Replace an existing output.
+    pub force: bool,
+    /// Show a progress bar (on a terminal).
+    pub progress: bool,
+    /// Shift every time by the run's wall-clock start (`shoal.run`
+    /// `start_unix_ns`), so that viewers show the real date.
+    pub epoch: bool,
+}
+
+/// The run's wall-clock start, ns since the Unix epoch, as the recorder
+/// kept it (`shoal.run` / `start_unix_ns`).
+pub fn start_unix_ns(rec: &recordings::Recording) -> Option<u64> {
+    rec.metadata()
+        .get("shoal.run")
+        .and_then(|m| m.get("start_unix_ns"))
+        .and_then(|v| v.parse().ok())
+}
+
+/// Refuses a file shoal did not write: one with neither shoal's run
+/// metadata nor a channel of a shoal sample type (converting it would give
+/// an empty view and look like success).
+pub fn ensure_shoal_recording(rec: &recordings::Recording, path: &Path) -> anyhow::Result<()> {
+    let ours = rec.metadata().contains_key("shoal.run")
+        || rec
+            .channels()
+            .iter()
+            .any(|c| recordings::type_info_by_schema(&c.schema_name).is_some());
+    anyhow::ensure!(
+        ours,
+        "{} is not a shoal recording: it has no `shoal.run` metadata and no channel of a shoal_msgs type (nothing was written)",
+        path.display()
+    );
+    Ok(())
+}
+
 /// Converts the recording at `recording` into a Foxglove MCAP at `out`:
 /// written beside it first and moved into place only when complete, so a
 /// failure leaves nothing; an existing `out` is replaced only with `force`
-/// and never when it is the input.
+/// and never when it is the input; a file shoal did not write is refused.
 pub fn export_to_file(
     recording: &Path,
     out: &Path,
-    force: bool,
-    progress: bool,
+    opts: ExportOptions,
 ) -> anyhow::Result<ExportReport> {
+    let ExportOptions {
+        force,
+        progress,
+        epoch,
+    } = opts;
     if out.exists() {
         if !force {
             anyhow::bail!("{} exists: pass --force to replace it", out.display());
@@ -77,6 +119,17 @@ pub fn export_to_file(
         }
     }
     let rec = recordings::Recording::open(recording)?;
+    ensure_shoal_recording(&rec, recording)?;
+    let epoch_ns = if epoch {
+        start_unix_ns(&rec).with_context(|| {
+            format!(
+                "{} does not say when its run started (shoal.run/start_unix_ns): export it without --epoch",
+                recording.display()
+            )
+        })?
+    } else {
+        0
+    };
     if rec.truncated() {
         tracing::warn!(
             "{} is truncated: exporting up to its last complete chunk",
@@ -86,7 +139,14 @@ pub fn export_to_file(
     let partial = partial_path(out);
     let result = File::create(&partial)
         .with_context(|| format!("cannot create {}", partial.display()))
-        .and_then(|f| export_foxglove(&rec, BufWriter::with_capacity(1 << 20, f), progress));
+        .and_then(|f| {
+            export_foxglove(
+                &rec,
+                BufWriter::with_capacity(1 << 20, f),
+                progress,
+                epoch_ns,
+            )
+        });
     let report = match result {
         Ok(r) => r,
         Err(e) => {
@@ -139,11 +199,14 @@ struct FoxgloveWriter<W: std::io::Write + std::io::Seek> {
     /// Channel id, topic, schema name, messages.
     channels: Vec<(u16, String, &'static str, u64)>,
     span_ns: (u64, u64),
+    /// Added to every log and publish time (the run's start with
+    /// `--epoch`, else 0).
+    epoch_ns: u64,
     buf: Vec<u8>,
 }
 
 impl<W: std::io::Write + std::io::Seek> FoxgloveWriter<W> {
-    fn new(w: W) -> anyhow::Result<Self> {
+    fn new(w: W, epoch_ns: u64) -> anyhow::Result<Self> {
         let writer = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
             .compression_threads(0)
@@ -156,6 +219,7 @@ impl<W: std::io::Write + std::io::Seek> FoxgloveWriter<W> {
             topics: HashMap::new(),
             channels: Vec::new(),
             span_ns: (u64::MAX, 0),
+            epoch_ns,
             buf: Vec::with_capacity(16 * 1024),
         })
     }
@@ -202,8 +266,8 @@ impl<W: std::io::Write + std::io::Seek> FoxgloveWriter<W> {
         let header = mcap::records::MessageHeader {
             channel_id: *id,
             sequence: *count as u32,
-            log_time: log_time_ns,
-            publish_time: log_time_ns,
+            log_time: log_time_ns + self.epoch_ns,
+            publish_time: log_time_ns + self.epoch_ns,
         };
         self.writer.write_to_known_channel(&header, &self.buf)?;
         *count += 1;
@@ -356,19 +420,6 @@ fn finite(v: &[f64]) -> bool {
     v.iter().all(|x| x.is_finite())
 }
 
-fn progress_bar(progress: bool, len: u64) -> indicatif::ProgressBar {
-    if !progress || !std::io::stderr().is_terminal() {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{spinner} [{elapsed_precise}] {bar:40.cyan/blue} {pos:>8}/{len} messages ({per_sec}, eta {eta})",
-    ) {
-        bar.set_style(style);
-    }
-    bar
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -444,12 +495,20 @@ radius_m = 2.0
 
     /// Exports and reads back: topic → messages as JSON, in log-time order.
     fn export_of(with_scenario: bool) -> (ExportReport, BTreeMap<String, Vec<(u64, Value)>>) {
+        export_at(with_scenario, 0)
+    }
+
+    /// [`export_of`] with every time shifted by `epoch_ns`.
+    fn export_at(
+        with_scenario: bool,
+        epoch_ns: u64,
+    ) -> (ExportReport, BTreeMap<String, Vec<(u64, Value)>>) {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("rec.mcap");
         write_recording(&path, with_scenario);
         let rec = recordings::Recording::open(&path).unwrap();
         let mut buf = std::io::Cursor::new(Vec::new());
-        let report = export_foxglove(&rec, &mut buf, false).unwrap();
+        let report = export_foxglove(&rec, &mut buf, false, epoch_ns).unwrap();
         let bytes = buf.into_inner();
         let mut out: BTreeMap<String, Vec<(u64, Value)>> = BTreeMap::new();
         for m in mcap::MessageStream::new(&bytes).unwrap() {
@@ -585,13 +644,65 @@ radius_m = 2.0
         write_recording(&rec, true);
         let out = dir.path().join("view.mcap");
         std::fs::write(&out, b"old").unwrap();
-        let e = export_to_file(&rec, &out, false, false).unwrap_err();
+        let forced = ExportOptions {
+            force: true,
+            ..Default::default()
+        };
+        let e = export_to_file(&rec, &out, ExportOptions::default()).unwrap_err();
         assert!(e.to_string().contains("--force"), "{e}");
         assert_eq!(std::fs::read(&out).unwrap(), b"old");
-        export_to_file(&rec, &out, true, false).unwrap();
+        export_to_file(&rec, &out, forced).unwrap();
         assert_ne!(std::fs::read(&out).unwrap(), b"old");
         assert!(!partial_path(&out).exists());
-        let e = export_to_file(&rec, &rec, true, false).unwrap_err();
+        let e = export_to_file(&rec, &rec, forced).unwrap_err();
         assert!(e.to_string().contains("input recording"), "{e}");
+    }
+
+    #[test]
+    fn the_epoch_shifts_every_log_time_and_timestamp_by_the_same_amount() {
+        let start = 1_796_000_000_123_456_789_u64;
+        let (_, plain) = export_at(true, 0);
+        let (_, dated) = export_at(true, start);
+        assert_eq!(
+            plain.keys().collect::<Vec<_>>(),
+            dated.keys().collect::<Vec<_>>()
+        );
+        for (topic, msgs) in &plain {
+            for ((t0, m0), (t1, m1)) in msgs.iter().zip(&dated[topic]) {
+                assert_eq!(t1 - t0, start, "{topic}");
+                if let (Some(a), Some(b)) = (m0.get("timestamp"), m1.get("timestamp")) {
+                    let ns = |v: &Value| {
+                        v["sec"].as_u64().unwrap() * 1_000_000_000 + v["nsec"].as_u64().unwrap()
+                    };
+                    assert_eq!(ns(b) - ns(a), start, "{topic}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_file_shoal_did_not_write_is_refused_and_nothing_is_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let other = dir.path().join("other.mcap");
+        {
+            let f = std::io::BufWriter::new(std::fs::File::create(&other).unwrap());
+            let mut w = mcap::Writer::new(f).unwrap();
+            let schema = w.add_schema("foo.Bar", "jsonschema", b"{}").unwrap();
+            let ch = w
+                .add_channel(schema, "/x", "json", &BTreeMap::new())
+                .unwrap();
+            let header = mcap::records::MessageHeader {
+                channel_id: ch,
+                sequence: 0,
+                log_time: 1,
+                publish_time: 1,
+            };
+            w.write_to_known_channel(&header, b"{}").unwrap();
+            w.finish().unwrap();
+        }
+        let out = dir.path().join("view.mcap");
+        let e = export_to_file(&other, &out, ExportOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("not a shoal recording"), "{e}");
+        assert!(!out.exists() && !partial_path(&out).exists());
     }
 }

@@ -1,7 +1,6 @@
 //! `shoal run`: spawn the group, drive the clock, stop, reap, clean up.
 
 use std::collections::BTreeMap;
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -234,6 +233,9 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         scenario_path: scenario_path.clone(),
         scenario: scenario.clone(),
     };
+    let effective = launch.effective_scenario();
+    std::fs::write(&effective, crate::preflight::effective_toml(scenario)?)
+        .with_context(|| format!("cannot write {}", effective.display()))?;
 
     let result = (|| -> anyhow::Result<(f64, u64)> {
         ports.recovery = Recovery::for_run(&ports.node, &procs, launch.clone())?;
@@ -357,19 +359,6 @@ fn join_recordings(recording: &Path, parts: &[PathBuf]) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn progress_bar(opts: &RunOptions, len: u64) -> indicatif::ProgressBar {
-    if !opts.progress || !std::io::stderr().is_terminal() {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{spinner} [{elapsed_precise}] {bar:40.cyan/blue} {pos:>5}/{len} s simulated ({per_sec}, eta {eta})",
-    ) {
-        bar.set_style(style);
-    }
-    bar
-}
-
 fn lockstep(
     opts: &RunOptions,
     ports: &mut Ports,
@@ -379,7 +368,11 @@ fn lockstep(
     let scenario = &opts.scenario;
     let ticks = scenario.ticks();
     let tick_ns = (scenario.rates.tick_s * 1e9).round() as u64;
-    let bar = progress_bar(opts, scenario.duration_s.ceil() as u64);
+    let bar = crate::progress::bar(
+        opts.progress,
+        scenario.duration_s.ceil() as u64,
+        "s simulated",
+    );
     let start = Instant::now();
     let mut due: Vec<usize> = Vec::with_capacity(procs.len());
     // Kills and stalls, by the tick at which they strike.
@@ -482,7 +475,11 @@ fn realtime(
 ) -> anyhow::Result<(f64, u64)> {
     let scenario = &opts.scenario;
     let end = epoch + (scenario.duration_s * 1e9) as u64;
-    let bar = progress_bar(opts, scenario.duration_s.ceil() as u64);
+    let bar = crate::progress::bar(
+        opts.progress,
+        scenario.duration_s.ceil() as u64,
+        "s simulated",
+    );
     let waitset = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<ipc::Service>()

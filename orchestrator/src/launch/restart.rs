@@ -55,6 +55,13 @@ impl Launch {
             .join(format!("{}.{}.log", p.vehicle, p.kind.name()))
     }
 
+    /// The scenario as every process runs it, defaults filled in
+    /// ([`crate::preflight::effective_toml`]): the recorder keeps it in the
+    /// recording.
+    pub(crate) fn effective_scenario(&self) -> PathBuf {
+        self.out.join("logs").join("effective-scenario.toml")
+    }
+
     /// The recording the recorder's `restart`-th incarnation writes.
     pub(crate) fn recording(&self, restart: u32) -> PathBuf {
         if restart == 0 {
@@ -102,6 +109,8 @@ impl Launch {
         if p.kind == ProcessKind::Recorder {
             args.push("--out".into());
             args.push(self.recording(restart).display().to_string());
+            args.push("--effective".into());
+            args.push(self.effective_scenario().display().to_string());
         }
         args
     }

@@ -180,6 +180,44 @@ pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The scenario as every process runs it, as TOML: a resolved scenario
+/// (D_a/D_b assigned) whose service sections hold every key of their typed
+/// config, defaults filled in (`[camera]`'s intrinsics, `[beacons]`'
+/// layout, `[pose]`, …), so that a reader of the recording gets them back.
+/// Keys each process derives from other sections ([`DERIVED_KEYS`]) are
+/// left out (the sections they come from are there); so is whichever of
+/// `[nav] position_noise_m` and `[mission] position_fix_noise_m` the
+/// scenario left out, since the leader's filter takes the first when it is
+/// set. The text loads as a scenario that runs the same.
+///
+/// [`DERIVED_KEYS`]: shoal_scenario::DERIVED_KEYS
+pub fn effective_toml(s: &Scenario) -> anyhow::Result<String> {
+    fn table<T: serde::Serialize>(cfg: &T) -> anyhow::Result<toml::Table> {
+        Ok(toml::Table::try_from(cfg)?)
+    }
+    let mut e = s.clone();
+    e.plant = table(&s.section::<sim_plant::PlantConfig>("plant")?)?;
+    e.nav = table(&s.section::<sim_plant::nav::NavConfig>("nav")?)?;
+    e.sonar = table(&s.section::<sonar::SonarConfig>("sonar")?)?;
+    e.camera = table(&s.section::<camera_pose::CameraConfig>("camera")?)?;
+    e.beacons = table(&s.section::<camera_pose::BeaconLayout>("beacons")?)?;
+    e.hull = table(&s.section::<camera_pose::HullConfig>("hull")?)?;
+    e.pose = table(&s.section::<camera_pose::PoseConfig>("pose")?)?;
+    e.mission = table(&s.section::<planner::LeaderConfig>("mission")?)?;
+    if s.nav.contains_key("position_noise_m") {
+        e.mission.remove("position_fix_noise_m");
+    } else {
+        e.nav.remove("position_noise_m");
+    }
+    e.follower = table(&s.section::<planner::FollowerConfig>("follower")?)?;
+    e.mpc = table(&s.section::<mpc::MpcConfig>("mpc")?)?;
+    e.acoustic = table(&s.section::<camera_pose::acoustic::AcousticConfig>("acoustic")?)?;
+    for (section, key, _) in shoal_scenario::DERIVED_KEYS {
+        e.section_table_mut(section)?.remove(key);
+    }
+    Ok(e.to_toml()?)
+}
+
 /// Followers of followers this many levels below the leader need the
 /// headway ([`planner::FollowerConfig::headway_s`]) to stay string-stable.
 pub const HEADWAY_DEPTH: usize = 3;

@@ -33,6 +33,8 @@ pub struct PlayOptions {
     pub run_id: Option<String>,
     /// Wait (up to 60 s) for this many subscribers before playing.
     pub wait_subscribers: usize,
+    /// Show a progress bar (on a terminal): simulated seconds played.
+    pub progress: bool,
 }
 
 /// Which process `rerun` re-runs, and how.
@@ -134,7 +136,23 @@ pub fn play(rec: &Recording, opts: &PlayOptions) -> anyhow::Result<()> {
         .with_context(|| format!("cannot open {service}"))?;
         pubs.insert(c.id, p);
     }
-    println!("replaying {} into run {run_id}", rec.path().display());
+    let span_s = match (rec.messages().first(), rec.messages().last()) {
+        (Some(a), Some(b)) => (b.log_time - a.log_time) as f64 * 1e-9,
+        _ => 0.0,
+    };
+    let pace = if opts.speed > 0.0 {
+        format!(
+            "{span_s:.1} s simulated at {}x: about {:.0} s",
+            opts.speed,
+            span_s / opts.speed
+        )
+    } else {
+        format!("{span_s:.1} s simulated, as fast as possible")
+    };
+    println!(
+        "replaying {} into run {run_id} ({pace})",
+        rec.path().display()
+    );
     let result = (|| -> anyhow::Result<u64> {
         if opts.wait_subscribers > 0 {
             let start = Instant::now();
@@ -148,8 +166,15 @@ pub fn play(rec: &Recording, opts: &PlayOptions) -> anyhow::Result<()> {
         }
         let start = Instant::now();
         let t0 = rec.messages().first().map_or(0, |m| m.log_time);
+        let t_end = rec.messages().last().map_or(t0, |m| m.log_time);
+        let bar = crate::progress::bar(
+            opts.progress,
+            (t_end - t0).div_ceil(1_000_000_000),
+            "s simulated",
+        );
         let mut sent = 0u64;
         for m in rec.messages() {
+            bar.set_position((m.log_time - t0) / 1_000_000_000);
             if opts.speed > 0.0 {
                 let due = Duration::from_secs_f64((m.log_time - t0) as f64 * 1e-9 / opts.speed);
                 if let Some(wait) = due.checked_sub(start.elapsed()) {
@@ -162,6 +187,7 @@ pub fn play(rec: &Recording, opts: &PlayOptions) -> anyhow::Result<()> {
                 sent += 1;
             }
         }
+        bar.finish_and_clear();
         Ok(sent)
     })();
     drop(pubs);

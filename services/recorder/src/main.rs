@@ -18,6 +18,10 @@ struct Cli {
     /// The MCAP file to write.
     #[arg(long)]
     out: std::path::PathBuf,
+    /// The scenario as every process runs it (defaults filled in), kept in
+    /// the recording's `shoal.run` metadata as `effective_toml`.
+    #[arg(long)]
+    effective: Option<std::path::PathBuf>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -25,8 +29,17 @@ fn main() -> anyhow::Result<()> {
     shoal_runtime::init_tracing();
     let text = std::fs::read_to_string(&cli.scenario)?;
     let scenario = shoal_scenario::Scenario::from_toml(&text)?;
+    let effective = cli
+        .effective
+        .as_deref()
+        .map(std::fs::read_to_string)
+        .transpose()?;
     let rt = shoal_runtime::Runtime::new(&cli.run)?;
-    let task = node::RecorderTask::new(&rt, &scenario, &text, &cli.out)?;
+    let texts = node::ScenarioTexts {
+        as_run: &text,
+        effective: effective.as_deref(),
+    };
+    let task = node::RecorderTask::new(&rt, &scenario, &texts, &cli.out)?;
     rt.run(task)?;
     Ok(())
 }

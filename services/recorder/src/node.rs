@@ -99,11 +99,19 @@ fn open_tap<T: Sample>(
     Ok(Box::new(TypedTap { sub, channel }))
 }
 
+/// The scenario texts the recording keeps in its `shoal.run` metadata.
+pub struct ScenarioTexts<'a> {
+    /// The scenario as the run was given it, resolved (`scenario_toml`).
+    pub as_run: &'a str,
+    /// Every section with its defaults (`effective_toml`).
+    pub effective: Option<&'a str>,
+}
+
 impl RecorderTask {
     pub fn new(
         rt: &Runtime,
         scenario: &Scenario,
-        scenario_text: &str,
+        texts: &ScenarioTexts<'_>,
         out: &Path,
     ) -> anyhow::Result<Self> {
         let opts = WriterOptions {
@@ -118,7 +126,18 @@ impl RecorderTask {
         let mut writer = RecordingWriter::create(out, &opts)?;
         let mut meta = BTreeMap::new();
         meta.insert("scenario".to_string(), scenario.name.clone());
-        meta.insert("scenario_toml".to_string(), scenario_text.to_string());
+        meta.insert("scenario_toml".to_string(), texts.as_run.to_string());
+        if let Some(e) = texts.effective {
+            meta.insert("effective_toml".to_string(), e.to_string());
+        }
+        // The wall-clock start of the run (log times are simulated time from
+        // 0): `shoal export --epoch` adds it so that viewers show the date.
+        // Metadata, not messages: two lockstep runs still give the same
+        // messages.
+        let start_unix_ns = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        meta.insert("start_unix_ns".to_string(), start_unix_ns.to_string());
         meta.insert("seed".to_string(), scenario.seed.to_string());
         meta.insert("mode".to_string(), rt.args().mode.as_str().to_string());
         meta.insert(

@@ -416,6 +416,27 @@ pub struct VehicleSpec {
     pub d_b_m: Option<f64>,
 }
 
+/// The service sections by name (`&` or `&mut` borrow), one list for the
+/// shared and the mutable lookup.
+macro_rules! section_match {
+    ($s:ident, $key:ident, $($borrow:tt)+) => {
+        Ok(match $key {
+            "mission" => $($borrow)+ $s.mission,
+            "plant" => $($borrow)+ $s.plant,
+            "nav" => $($borrow)+ $s.nav,
+            "camera" => $($borrow)+ $s.camera,
+            "beacons" => $($borrow)+ $s.beacons,
+            "hull" => $($borrow)+ $s.hull,
+            "pose" => $($borrow)+ $s.pose,
+            "sonar" => $($borrow)+ $s.sonar,
+            "follower" => $($borrow)+ $s.follower,
+            "mpc" => $($borrow)+ $s.mpc,
+            "acoustic" => $($borrow)+ $s.acoustic,
+            other => return Err(invalid(other, "no such section")),
+        })
+    };
+}
+
 /// A whole scenario.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -620,20 +641,12 @@ impl Scenario {
 
     /// The raw table of one service section.
     fn section_table(&self, key: &str) -> Result<&toml::Table, ScenarioError> {
-        Ok(match key {
-            "mission" => &self.mission,
-            "plant" => &self.plant,
-            "nav" => &self.nav,
-            "camera" => &self.camera,
-            "beacons" => &self.beacons,
-            "hull" => &self.hull,
-            "pose" => &self.pose,
-            "sonar" => &self.sonar,
-            "follower" => &self.follower,
-            "mpc" => &self.mpc,
-            "acoustic" => &self.acoustic,
-            other => return Err(invalid(other, "no such section")),
-        })
+        section_match!(self, key, &)
+    }
+
+    /// The raw table of one service section, to change.
+    pub fn section_table_mut(&mut self, key: &str) -> Result<&mut toml::Table, ScenarioError> {
+        section_match!(self, key, &mut)
     }
 
     /// Parses the obstacle list into the sonar's obstacle type.
