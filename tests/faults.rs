@@ -221,4 +221,18 @@ fn a_killed_recorder_loses_about_one_simulated_second() {
         "the recording ends at {:.2} s: {lost_s:.2} s of the run before the kill is lost",
         last_ns as f64 * 1e-9
     );
+    // The recovered recording summarises on its own.
+    let sum = tmp.path().join("summary-of-fixed");
+    let o = run_shoal(&[
+        "summarize",
+        "--quiet",
+        fixed.to_str().unwrap(),
+        "--out",
+        sum.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = summary(&sum);
+    let t = s["sim_time_s"].as_f64().unwrap();
+    assert!((38.0..=40.0).contains(&t), "summarised up to {t} s");
+    assert_eq!(s["safety"]["collisions"], 0);
 }

@@ -271,6 +271,80 @@ fn sigint_to_shoal_stops_every_child_and_leaves_no_shared_memory() {
     let rec = Recording::open(&out.join("recording.mcap")).unwrap();
     assert!(!rec.truncated());
     assert!(!rec.messages().is_empty());
+    // The summary and plots of the part that ran, and where they are.
+    assert!(
+        err.contains("the summary and plots of the part that ran"),
+        "{err}"
+    );
+    let s = summary(&out);
+    let t = s["sim_time_s"].as_f64().unwrap();
+    let last = rec.messages().iter().map(|m| m.log_time).max().unwrap() as f64 * 1e-9;
+    assert!(
+        t > 0.0 && t < 3000.0 && (t - last).abs() < 0.1,
+        "{t} vs {last}"
+    );
+    assert!(out.join("plots").read_dir().unwrap().next().is_some());
+}
+
+#[test]
+fn a_summary_from_the_recording_alone_matches_the_runs_own() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sc = write_scenario(tmp.path(), "s.toml", &small_scenario("alone", 20.0));
+    let out = tmp.path().join("r");
+    let o = run_shoal(&[
+        "run",
+        "--quiet",
+        sc.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rec = out.join("recording.mcap");
+    let again = tmp.path().join("again");
+    let o = run_shoal(&[
+        "summarize",
+        rec.to_str().unwrap(),
+        "--out",
+        again.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(again.join("plots").read_dir().unwrap().next().is_some());
+    let (a, b) = (summary(&out), summary(&again));
+    // What the recording holds is the same figure to the bit.
+    for key in [
+        "/scenario",
+        "/seed",
+        "/vehicles",
+        "/mode",
+        "/run_id",
+        "/sim_time_s",
+        "/ticks",
+        "/safety",
+        "/formation",
+        "/perception",
+        "/mission",
+        "/latency_us/end_to_end",
+        "/mpc",
+        "/events",
+        "/verdict",
+        "/recording/messages",
+    ] {
+        assert_eq!(a.pointer(key), b.pointer(key), "{key}");
+    }
+    let (wa, wb) = (
+        a["wall_time_s"].as_f64().unwrap(),
+        b["wall_time_s"].as_f64().unwrap(),
+    );
+    assert!((wa - wb).abs() < 0.05 * wa + 0.05, "wall {wa} vs {wb}");
+    // A second summary into the same place is refused without --force.
+    let o = run_shoal(&[
+        "summarize",
+        rec.to_str().unwrap(),
+        "--out",
+        again.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--force"));
 }
 
 #[test]

@@ -66,7 +66,25 @@ pub fn run_and_summarize(
             out.display()
         );
     }
-    let outcome = launch::run(&settings.options(&scenario, out))?;
+    let outcome = match launch::run(&settings.options(&scenario, out)) {
+        Ok(o) => o,
+        Err(e) => {
+            let interrupted = e
+                .chain()
+                .any(|c| matches!(c.downcast_ref(), Some(launch::RunError::Interrupted(_))));
+            if interrupted && out.join("recording.mcap").exists() {
+                match summarize_into(&out.join("recording.mcap"), out) {
+                    Ok(s) => eprintln!(
+                        "stopped at t = {:.1} s: the summary and plots of the part that ran are in {}",
+                        s.sim_time_s,
+                        out.display()
+                    ),
+                    Err(err) => tracing::warn!("no summary of the part that ran: {err:#}"),
+                }
+            }
+            return Err(e);
+        }
+    };
     let rec = recordings::Recording::open(&outcome.recording)?;
     let summary = summarize(&scenario, &rec, &outcome, settings.mode.as_str());
     summary.write(&out.join("summary.json"))?;
@@ -76,6 +94,26 @@ pub fn run_and_summarize(
         scenario,
         recording: rec,
     })
+}
+
+/// Summarises the recording at `recording` alone into `out`
+/// (summary.json and plots/), as `shoal summarize` does and as a run
+/// stopped by Ctrl-C does for the part it ran. A truncated recording is
+/// read up to its last complete chunk.
+pub fn summarize_into(recording: &Path, out: &Path) -> anyhow::Result<Summary> {
+    let rec = recordings::Recording::open(recording)?;
+    crate::export::ensure_shoal_recording(&rec, recording)?;
+    if rec.truncated() {
+        tracing::warn!(
+            "{} is truncated: summarising up to its last complete chunk (`shoal recover` writes a whole copy)",
+            recording.display()
+        );
+    }
+    let (scenario, summary) = crate::analysis::from_recording::summarize_recording(&rec)?;
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    summary.write(&out.join("summary.json"))?;
+    plots::write_plots(&scenario, &rec, &out.join("plots")).context("writing the plots")?;
+    Ok(summary)
 }
 
 #[cfg(test)]

@@ -5,6 +5,7 @@
 
 pub mod compare;
 pub mod formation;
+pub mod from_recording;
 pub mod metrics;
 pub mod summary;
 pub mod track;

@@ -302,9 +302,10 @@ impl Summary {
         })
     }
 
-    /// Writes it as pretty JSON.
+    /// Writes it as pretty JSON, every number at most
+    /// [`SIGNIFICANT_DIGITS`] significant digits ([`tidy_json`]).
     pub fn write(&self, path: &Path) -> Result<(), SummaryError> {
-        let text = serde_json::to_string_pretty(self).map_err(|source| SummaryError::Parse {
+        let text = tidy_json_text(self).map_err(|source| SummaryError::Parse {
             path: path.display().to_string(),
             source,
         })?;
@@ -328,6 +329,36 @@ impl Summary {
             .copied()
             .max_by(f64::total_cmp)
     }
+}
+
+/// Significant digits a written figure keeps: beyond them a sum of
+/// binary fractions only shows its rounding noise (`118.46000000000001`).
+pub const SIGNIFICANT_DIGITS: usize = 12;
+
+/// Rounds every float of `v` to [`SIGNIFICANT_DIGITS`] significant digits
+/// (shortest form), in place.
+pub fn tidy_json(v: &mut serde_json::Value) {
+    match v {
+        serde_json::Value::Number(n) if n.is_f64() => {
+            if let Some(x) = n.as_f64() {
+                let digits = SIGNIFICANT_DIGITS - 1;
+                let rounded: f64 = format!("{x:.digits$e}").parse().unwrap_or(x);
+                if let Some(r) = serde_json::Number::from_f64(rounded) {
+                    *n = r;
+                }
+            }
+        }
+        serde_json::Value::Array(a) => a.iter_mut().for_each(tidy_json),
+        serde_json::Value::Object(m) => m.values_mut().for_each(tidy_json),
+        _ => {}
+    }
+}
+
+/// `value` as pretty JSON with its floats tidied ([`tidy_json`]).
+pub fn tidy_json_text<T: Serialize>(value: &T) -> Result<String, serde_json::Error> {
+    let mut v = serde_json::to_value(value)?;
+    tidy_json(&mut v);
+    serde_json::to_string_pretty(&v)
 }
 
 /// A figure as a table shows it: `digits` decimals, or `n/a` where it does
@@ -402,4 +433,36 @@ pub fn summarize(
     };
     s.verdict = verdict(&s);
     s
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn written_figures_carry_no_float_noise() {
+        let mut v = serde_json::json!({
+            "a": 118.46000000000001,
+            "b": [199.98000000000002, 1e-7, 3],
+            "c": {"d": 0.1 + 0.2, "e": "x", "f": 2.0},
+        });
+        tidy_json(&mut v);
+        let text = v.to_string();
+        assert!(
+            text.contains("118.46,") || text.contains("118.46}"),
+            "{text}"
+        );
+        assert!(text.contains("199.98,"), "{text}");
+        assert!(text.contains("0.3,") || text.contains("0.3}"), "{text}");
+        assert_eq!(v["b"][2], 3);
+        assert_eq!(v["b"][1].as_f64(), Some(1e-7));
+        // A summary survives the round trip.
+        let s = Summary {
+            sim_time_s: 199.98000000000002,
+            ..Default::default()
+        };
+        let back: Summary = serde_json::from_str(&tidy_json_text(&s).unwrap()).unwrap();
+        assert_eq!(back.sim_time_s, 199.98);
+    }
 }

@@ -66,7 +66,7 @@ pub fn run(cmd: CompareCmd) -> anyhow::Result<()> {
     std::fs::write(out.join("compare.md"), &md)?;
     std::fs::write(
         out.join("compare.json"),
-        serde_json::to_string_pretty(&rows)?,
+        crate::analysis::summary::tidy_json_text(&rows)?,
     )?;
     print!("{md}");
     println!("{}", out.display());

@@ -13,6 +13,7 @@ mod inspect;
 mod recover;
 mod replay;
 mod run;
+mod summarize;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -51,6 +52,9 @@ enum Cmd {
     /// Run a scenario (default: the paper's) and leave DIR/recording.mcap,
     /// DIR/summary.json, DIR/plots/ and DIR/logs/.
     Run(run::RunCmd),
+    /// Write summary.json and the plots from a recording alone (a finished
+    /// run, one cut short, a recovered one).
+    Summarize(summarize::SummarizeCmd),
     /// Validate a scenario without starting anything.
     Check {
         /// Scenario TOML (default: the embedded paper scenario).
@@ -123,6 +127,7 @@ pub fn main() -> ExitCode {
             json,
             digest,
         } => inspect::run(recording, json, digest),
+        Cmd::Summarize(cmd) => summarize::run(cmd),
         Cmd::Compare(cmd) => compare::run(cmd),
         Cmd::Gen(cmd) => gen::run(cmd),
         Cmd::Campaign(cmd) => campaign::run(cmd),
@@ -194,7 +199,16 @@ mod tests {
         use clap::CommandFactory as _;
         let help = Cli::command().render_long_help().to_string();
         for name in [
-            "run", "check", "compare", "inspect", "gen", "campaign", "export", "recover", "replay",
+            "run",
+            "summarize",
+            "check",
+            "compare",
+            "inspect",
+            "gen",
+            "campaign",
+            "export",
+            "recover",
+            "replay",
             "bench",
         ] {
             assert!(help.contains(&format!("  {name}")), "{name}: {help}");

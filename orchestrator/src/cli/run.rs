@@ -88,7 +88,8 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn print_table(s: &Summary) {
+/// The closing table of a run (also `shoal summarize`'s), on stderr.
+pub(super) fn print_table(s: &Summary) {
     let f = &s.safety;
     let mark = |ok: bool| if ok { "pass" } else { "FAIL" };
     let na = fmt_or_na;

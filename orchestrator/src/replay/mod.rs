@@ -20,6 +20,7 @@ use recordings::Recording;
 use shoal_runtime::{ChannelLimits, Mode, Publisher, Subscriber};
 use shoal_scenario::{ProcessKind, ProcessSpec, Scenario};
 
+use crate::analysis::from_recording::recorded_scenario;
 use crate::launch::os as sys;
 use crate::launch::supervisor::Supervisor;
 use crate::launch::{wait_done, wait_ready, Ports};
@@ -102,16 +103,6 @@ fn open_publisher(
         }))
     }
     ipc_types::with_sample_type!(schema, T => typed::<T>(node, service, limits), else bail!("no sample type for schema {schema}"))
-}
-
-/// The recorded run's scenario (resolved, as the processes read it).
-fn recorded_scenario(rec: &Recording) -> anyhow::Result<Scenario> {
-    let text = rec
-        .metadata()
-        .get("shoal.run")
-        .and_then(|m| m.get("scenario_toml"))
-        .context("the recording has no shoal.run/scenario_toml metadata")?;
-    Scenario::from_toml(text).context("the recorded scenario does not parse")
 }
 
 /// Plays every recorded message, in recorded order, onto a new domain.

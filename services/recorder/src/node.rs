@@ -145,6 +145,7 @@ impl RecorderTask {
             env!("CARGO_PKG_VERSION").to_string(),
         );
         meta.insert("vehicles".to_string(), scenario.vehicles.len().to_string());
+        meta.insert("run_id".to_string(), rt.args().run_id.clone());
         writer.metadata("shoal.run", meta)?;
 
         let run = rt.args().run_id.clone();
