@@ -90,6 +90,57 @@ fn a_python_iceoryx2_client_reads_truth_from_a_live_run() {
 }
 
 #[test]
+fn an_outside_subscriber_still_attached_when_the_run_ends_sees_a_clean_end() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = write_scenario(tmp.path(), "end.toml", &small_scenario("end", 4.0));
+    let out = tmp.path().join("end");
+    let mut run = shoal()
+        .args(["run", "--mode", "realtime", "--out"])
+        .arg(&out)
+        .arg(&scenario)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The client holds its subscriber past the run's end, as a viewer
+    // left open would.
+    let client = python_with_iceoryx2()
+        .arg(&out)
+        .args(["F1", "--samples", "5", "--timeout", "15", "--hold"])
+        .output()
+        .unwrap();
+    let status = run.wait().unwrap();
+    let mut err = String::new();
+    use std::io::Read;
+    run.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+    assert!(status.success(), "shoal run failed: {err}");
+    let client_err = String::from_utf8_lossy(&client.stderr);
+    assert!(
+        client.status.success(),
+        "python client: {}\n{client_err}",
+        String::from_utf8_lossy(&client.stdout)
+    );
+    for bad in ["corrupt", "already removed", "static storage"] {
+        assert!(
+            !client_err.to_lowercase().contains(bad),
+            "the client saw an unclean end ({bad}):\n{client_err}"
+        );
+    }
+    assert!(err.contains("outside node(s) still use"), "{err}");
+    // The client was the last user: what remains of the run's domain is
+    // stale now, and the next run's sweep (run here as it runs there)
+    // removes all of it.
+    let run_id = wait_run_json(&out, Duration::from_secs(1))["run_id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(shoal_runtime::alive_nodes(&run_id).is_empty());
+    assert!(shoal_runtime::stale_domains().contains(&run_id));
+    shoal_runtime::sweep_stale_domains();
+    assert_domain_clean(&run_id);
+}
+
+#[test]
 fn a_realtime_run_reports_deadlines_steps_and_every_hop() {
     let tmp = tempfile::tempdir().unwrap();
     let scenario = write_scenario(tmp.path(), "rt.toml", &small_scenario("rt", 6.0));

@@ -6,7 +6,10 @@ prints what it received as JSON. Nothing here comes from shoal's Rust code:
 the sample layout is declared from DESIGN.md's channel table and the domain
 (prefix, root) from the run's `run.json`.
 
-usage: live_truth.py OUT_DIR VEHICLE [--samples N] [--timeout S]
+usage: live_truth.py OUT_DIR VEHICLE [--samples N] [--timeout S] [--hold]
+
+With --hold it keeps its subscriber until the run's orchestrator (run.json's
+pid) has exited, as a viewer left open would, and only then lets go.
 """
 
 import argparse
@@ -50,12 +53,23 @@ class Truth(ctypes.Structure):
         return "shoal.Truth.v1"
 
 
+def running(pid: int) -> bool:
+    """True while the process exists and has not exited (a zombie waiting
+    for its parent to reap it has)."""
+    try:
+        stat = pathlib.Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=pathlib.Path)
     ap.add_argument("vehicle")
     ap.add_argument("--samples", type=int, default=20)
     ap.add_argument("--timeout", type=float, default=30.0)
+    ap.add_argument("--hold", action="store_true")
     args = ap.parse_args()
     assert ctypes.sizeof(Truth) == 232, ctypes.sizeof(Truth)
 
@@ -111,6 +125,13 @@ def main() -> int:
             }
         )
         del sample
+    if args.hold:
+        pid = int(run["pid"])
+        while running(pid) and time.monotonic() < deadline + 30:
+            time.sleep(0.05)
+        # still attached after the run ended: its samples are still readable
+        while subscriber.receive() is not None:
+            pass
     del subscriber
     del service
     del node

@@ -273,7 +273,13 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     let parts = std::mem::take(&mut ports.recovery.recording_parts);
     drop(ports);
     let stats = shoal_runtime::stats::read_stats_files(&run_id);
-    shoal_runtime::cleanup_domain(&run_id);
+    if let shoal_runtime::Release::LeftTo(nodes) = shoal_runtime::release_domain(&run_id) {
+        tracing::info!(
+            "{} outside node(s) still use run {run_id}'s services ({}): they end cleanly when they leave, and the next run removes what remains",
+            nodes.len(),
+            nodes.join(", ")
+        );
+    }
     // A restarted recorder wrote the rest of the run into new files: join them.
     let joined = if parts.is_empty() {
         Ok(())

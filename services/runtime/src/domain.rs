@@ -92,6 +92,10 @@ pub fn cleanup_domain(run_id: &str) -> usize {
 /// The file in a run's root that names the process owning the run.
 const OWNER_FILE: &str = "owner.pid";
 
+/// The file in a run's root that says its orchestrator has ended and left
+/// the domain to outside nodes ([`release_domain`]).
+const RELEASED_FILE: &str = "released";
+
 /// Marks `pid` (the orchestrator) as the owner of the run's domain, so a
 /// later run can tell a dead run's leftovers from a live run's files.
 pub fn claim_domain(run_id: &str, pid: u32) -> std::io::Result<()> {
@@ -108,8 +112,58 @@ fn alive(pid: i32) -> bool {
     r == 0 || std::io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
 }
 
-/// Runs whose owner (the orchestrator that claimed them) is dead: their
-/// domain files are leftovers of a crash.
+/// The nodes alive in a run's domain, by name: after the run's own
+/// processes have ended, outside clients (a Python reader, a replay).
+pub fn alive_nodes(run_id: &str) -> Vec<String> {
+    use iceoryx2::node::{NodeState, NodeView as _};
+    use iceoryx2::prelude::{ipc, CallbackProgression, Node};
+    let mut out = Vec::new();
+    let _ = Node::<ipc::Service>::list(&iceoryx_config(run_id), |state| {
+        if let NodeState::Alive(view) = state {
+            out.push(
+                view.details()
+                    .as_ref()
+                    .map_or_else(|| "?".to_string(), |d| d.name().to_string()),
+            );
+        }
+        CallbackProgression::Continue
+    });
+    out.sort();
+    out
+}
+
+/// What ending a run did to its domain.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Release {
+    /// Every file removed (how many).
+    Removed(usize),
+    /// Outside nodes still use it (their names): the run's own files are
+    /// removed; iceoryx2 removes each service with its last user, and the
+    /// next run's stale sweep removes what remains once they have left
+    /// (or crashed).
+    LeftTo(Vec<String>),
+}
+
+/// Ends a run's hold on its domain, once its own processes are gone: all of
+/// it when no node is alive; otherwise only the run's bookkeeping (the
+/// owner file, the statistics files), so that a client still attached
+/// sees its services end cleanly instead of vanish under it.
+pub fn release_domain(run_id: &str) -> Release {
+    let alive = alive_nodes(run_id);
+    if alive.is_empty() {
+        return Release::Removed(cleanup_domain(run_id));
+    }
+    let root = domain_root(run_id);
+    let _ = std::fs::write(root.join(RELEASED_FILE), "");
+    let _ = std::fs::remove_file(root.join(OWNER_FILE));
+    let _ = std::fs::remove_dir_all(root.join("stats"));
+    Release::LeftTo(alive)
+}
+
+/// Runs whose owner (the orchestrator that claimed them) is dead, or that
+/// no owner holds any more (released to outside clients, or half made,
+/// for over a minute), and in which no node is alive: their domain files
+/// are leftovers of a crash.
 pub fn stale_domains() -> Vec<String> {
     let mut out = Vec::new();
     let Ok(entries) = std::fs::read_dir("/tmp/shoal") else {
@@ -122,10 +176,19 @@ pub fn stale_domains() -> Vec<String> {
         let owner = std::fs::read_to_string(e.path().join(OWNER_FILE))
             .ok()
             .and_then(|s| s.trim().parse::<i32>().ok());
-        if let Some(pid) = owner {
-            if pid > 0 && !alive(pid) {
-                out.push(run_id);
-            }
+        let released = e.path().join(RELEASED_FILE).exists();
+        let unowned = match owner {
+            Some(pid) => pid > 0 && !alive(pid),
+            None if released => true,
+            None => e
+                .metadata()
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|t| t.elapsed().ok())
+                .is_some_and(|age| age > std::time::Duration::from_secs(60)),
+        };
+        if unowned && alive_nodes(&run_id).is_empty() {
+            out.push(run_id);
         }
     }
     out.sort();

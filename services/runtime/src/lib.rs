@@ -44,8 +44,8 @@ pub use iceoryx2::service::{ipc, local, Service};
 use ipc_types::{Clock, RunChannel};
 
 pub use domain::{
-    cleanup_domain, iceoryx_config, list_domain_files, stale_domains, sweep_stale_domains,
-    ChannelLimits, EVENTS_HISTORY,
+    alive_nodes, cleanup_domain, iceoryx_config, list_domain_files, release_domain, stale_domains,
+    sweep_stale_domains, ChannelLimits, Release, EVENTS_HISTORY,
 };
 pub use latency::LatencyRecorder;
 pub use ports::{Publisher, Subscriber};
