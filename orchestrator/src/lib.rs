@@ -31,3 +31,4 @@ pub mod plots;
 pub mod preflight;
 pub mod progress;
 pub mod replay;
+pub mod report;

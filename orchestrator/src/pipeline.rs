@@ -11,10 +11,11 @@ use crate::launch::{self, RunSettings};
 use crate::{plots, preflight};
 
 /// What a run writes into its output directory (and `--force` removes).
-pub const RUN_OUTPUTS: [&str; 6] = [
+pub const RUN_OUTPUTS: [&str; 7] = [
     "recording.mcap",
     "summary.json",
     "plots",
+    "report.html",
     "logs",
     "run.json",
     "scenario.toml",
@@ -89,6 +90,7 @@ pub fn run_and_summarize(
     let summary = summarize(&scenario, &rec, &outcome, settings.mode.as_str());
     summary.write(&out.join("summary.json"))?;
     plots::write_plots(&scenario, &rec, &out.join("plots")).context("writing the plots")?;
+    crate::report::write_report(out, &summary, &scenario, &rec).context("writing the report")?;
     Ok(Finished {
         summary,
         scenario,
@@ -97,7 +99,7 @@ pub fn run_and_summarize(
 }
 
 /// Summarises the recording at `recording` alone into `out`
-/// (summary.json and plots/), as `shoal summarize` does and as a run
+/// (summary.json, plots/ and report.html), as `shoal summarize` does and as a run
 /// stopped by Ctrl-C does for the part it ran. A truncated recording is
 /// read up to its last complete chunk.
 pub fn summarize_into(recording: &Path, out: &Path) -> anyhow::Result<Summary> {
@@ -113,6 +115,7 @@ pub fn summarize_into(recording: &Path, out: &Path) -> anyhow::Result<Summary> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     summary.write(&out.join("summary.json"))?;
     plots::write_plots(&scenario, &rec, &out.join("plots")).context("writing the plots")?;
+    crate::report::write_report(out, &summary, &scenario, &rec).context("writing the report")?;
     Ok(summary)
 }
 

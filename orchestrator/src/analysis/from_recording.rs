@@ -170,6 +170,15 @@ pub fn summarize_recording(rec: &Recording) -> anyhow::Result<(Scenario, Summary
     };
     summary.samples_lost = total(|s| s.lost);
     summary.samples_rejected = total(|s| s.rejected);
+    // Within one tick of the end is the whole run.
+    if summary.sim_time_s + 0.5 * scenario.rates.tick_s < scenario.duration_s {
+        summary.partial = true;
+        summary.verdict.pass = false;
+        summary.verdict.failed.push(format!(
+            "the run stopped at t = {:.1} s of {} s: the figures cover the part that ran",
+            summary.sim_time_s, scenario.duration_s
+        ));
+    }
     Ok((scenario, summary))
 }
 

@@ -83,6 +83,10 @@ pub struct Summary {
     pub recording: RecordingFigures,
     /// Whether every safety figure passed, and which did not.
     pub verdict: Verdict,
+    /// The run stopped before its scenario's end (Ctrl-C, a kill): the
+    /// figures cover the part that ran, and the verdict is a fail.
+    #[serde(default)]
+    pub partial: bool,
 }
 
 /// Pass or fail, from the safety figures: no collision of either kind, no
@@ -430,6 +434,7 @@ pub fn summarize(
             truncated: rec.truncated(),
         },
         verdict: Verdict::default(),
+        partial: false,
     };
     s.verdict = verdict(&s);
     s

@@ -287,11 +287,12 @@ pub fn run(o: &CampaignOptions) -> anyhow::Result<Report> {
     for (i, j) in jobs.iter().enumerate() {
         let dir = o.out.join("runs").join(&j.name);
         match Summary::read(&dir.join("summary.json")) {
-            Ok(s) => {
+            // A run stopped part-way is run again.
+            Ok(s) if !s.partial => {
                 rows[i] = Some(row(j, &dir, &s));
                 bar.inc(1);
             }
-            Err(_) => todo.push(i),
+            _ => todo.push(i),
         }
     }
     let (tx, rx) = mpsc::channel::<(usize, i32, std::io::Result<std::process::ExitStatus>)>();
@@ -358,21 +359,23 @@ pub fn run(o: &CampaignOptions) -> anyhow::Result<Report> {
         let job = &jobs[i];
         let dir = o.out.join("runs").join(&job.name);
         let r = match Summary::read(&dir.join("summary.json")) {
-            Ok(s) => row(job, &dir, &s),
-            Err(_) if stopping => {
-                unfinished(job, &dir, Status::Interrupted, vec!["interrupted".into()])
-            }
-            Err(e) => unfinished(
+            Ok(s) if !s.partial => row(job, &dir, &s),
+            _ if stopping => unfinished(job, &dir, Status::Interrupted, vec!["interrupted".into()]),
+            other => unfinished(
                 job,
                 &dir,
                 Status::Error,
                 vec![format!(
-                    "the run failed ({}; see {}): {e}",
+                    "the run failed ({}; see {}): {}",
                     match status {
                         Ok(s) => s.to_string(),
                         Err(e) => e.to_string(),
                     },
-                    dir.join("run.log").display()
+                    dir.join("run.log").display(),
+                    match other {
+                        Ok(_) => "it stopped part-way".to_string(),
+                        Err(e) => e.to_string(),
+                    }
                 )],
             ),
         };

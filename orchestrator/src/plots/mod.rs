@@ -26,7 +26,7 @@ use recordings::Recording;
 mod campaign;
 mod compare;
 mod figures;
-mod geometry;
+pub(crate) mod geometry;
 mod style;
 
 pub use campaign::write_campaign_plot;
@@ -110,6 +110,11 @@ impl Fig {
             Fig::SlotError => "Slot error of each follower (ground truth)",
         }
     }
+}
+
+/// The figures [`write_plots`] writes: (file stem, title), in order.
+pub fn figure_list() -> Vec<(&'static str, &'static str)> {
+    FIGURES.iter().map(|f| (f.stem(), f.title())).collect()
 }
 
 /// Writes the figures of a run into `dir` (created if missing) as PNG and SVG; returns the files written.

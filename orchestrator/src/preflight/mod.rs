@@ -128,6 +128,9 @@ pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
     // Parsed whatever the perception mode, so a bad key is never silent.
     let acoustic: camera_pose::acoustic::AcousticConfig = s.section("acoustic")?;
     acoustic.validate().map_err(anyhow::Error::msg)?;
+    // Every number within its physical range, defaults included.
+    let effective: toml::Table = toml::from_str(&effective_toml(s)?)?;
+    shoal_scenario::ranges::check(&effective)?;
     let field = sonar::ObstacleField::new(&obstacles).context("obstacles")?;
     check_start(s, &field, &camera, &beacons, &hull, &pose)?;
 
@@ -384,6 +387,55 @@ fn describe(status: BeaconStatus, camera: &camera_pose::CameraConfig) -> String 
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
     use super::*;
+
+    #[test]
+    fn every_range_checks_a_number_of_a_full_scenario() {
+        let paper = include_str!("../../../scenarios/paper.toml");
+        let text = format!(
+            "{paper}
+[[obstacles]]
+kind = \"cylinder\"
+center_ned_m = [400.0, 25.0, 10.0]
+radius_m = 2.0
+half_height_m = 10.0
+
+[[obstacles]]
+kind = \"sphere\"
+center_ned_m = [416.0, 6.0, 10.0]
+radius_m = 3.0
+
+[[obstacles]]
+kind = \"mesh\"
+vertices_ned_m = [[600.0, -30.0, 25.0], [600.0, 30.0, 25.0], [900.0, 0.0, 25.0]]
+triangles = [[0, 1, 2]]
+
+[[faults]]
+action = \"stall\"
+vehicle = \"F1\"
+process = \"mpc\"
+at_s = 10.0
+duration_s = 1.0
+"
+        );
+        let unmatched = |text: &str| {
+            let mut s = Scenario::from_toml(text).unwrap();
+            resolve(&mut s).unwrap();
+            let effective: toml::Table = toml::from_str(&effective_toml(&s).unwrap()).unwrap();
+            shoal_scenario::ranges::unmatched(&effective)
+        };
+        // The effective scenario holds one of the two position noises
+        // (the one the file sets, else the leader's filter's).
+        let with_nav = format!("{text}\n[nav]\nposition_noise_m = 0.5\n");
+        let (a, b) = (unmatched(&text), unmatched(&with_nav));
+        let neither: Vec<_> = a.iter().filter(|p| b.contains(p)).collect();
+        assert!(neither.is_empty(), "ranges that check nothing: {neither:?}");
+        // And one beyond its range is refused, named.
+        let fast = text.replace("speed_mps = 1.0", "speed_mps = 1000.0");
+        assert_ne!(fast, text);
+        let mut s = Scenario::from_toml(&fast).unwrap();
+        let e = resolve(&mut s).unwrap_err().to_string();
+        assert!(e.contains("mission.speed_mps: 1000 is out of range"), "{e}");
+    }
 
     #[test]
     fn a_deep_tree_without_headway_is_warned_about_and_the_paper_is_not() {

@@ -152,6 +152,40 @@ pub fn validate(s: &Scenario) -> Result<(), ScenarioError> {
     }
     for (i, f) in s.faults.iter().enumerate() {
         let key = |k: &str| format!("faults[{i}].{k}");
+        // A key the action does not use would be silently ignored.
+        let unused: &[(&str, bool)] = match f.action {
+            FaultAction::Kill => &[
+                ("duration_s", f.duration_s.is_some()),
+                ("from_s", f.from_s.is_some()),
+                ("to_s", f.to_s.is_some()),
+                ("fraction", f.fraction.is_some()),
+            ],
+            FaultAction::Stall => &[
+                ("from_s", f.from_s.is_some()),
+                ("to_s", f.to_s.is_some()),
+                ("fraction", f.fraction.is_some()),
+            ],
+            FaultAction::Drop => &[
+                ("process", f.process.is_some()),
+                ("at_s", f.at_s.is_some()),
+                ("duration_s", f.duration_s.is_some()),
+            ],
+            FaultAction::Blind => &[
+                ("process", f.process.is_some()),
+                ("at_s", f.at_s.is_some()),
+                ("duration_s", f.duration_s.is_some()),
+                ("fraction", f.fraction.is_some()),
+            ],
+        };
+        if let Some((k, _)) = unused.iter().find(|(_, set)| *set) {
+            return Err(invalid(
+                key(k),
+                format!(
+                    "is not used by a `{}` fault",
+                    format!("{:?}", f.action).to_lowercase()
+                ),
+            ));
+        }
         let is_vehicle = s.vehicles.iter().any(|v| v.name == f.vehicle);
         match f.action {
             FaultAction::Kill | FaultAction::Stall => {
@@ -221,6 +255,12 @@ pub fn validate(s: &Scenario) -> Result<(), ScenarioError> {
                     return Err(invalid(
                         key("to_s"),
                         format!("must be after from_s ({a}), got {b}"),
+                    ));
+                }
+                if a >= s.duration_s {
+                    return Err(invalid(
+                        key("from_s"),
+                        format!("{a} s is after the run's end ({} s)", s.duration_s),
                     ));
                 }
                 if f.action == FaultAction::Drop {

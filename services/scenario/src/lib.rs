@@ -29,6 +29,7 @@
 //! ```
 
 pub mod faults;
+pub mod ranges;
 
 use std::collections::{BTreeMap, HashMap};
 
@@ -1280,6 +1281,26 @@ impl Scenario {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn a_fault_key_its_action_ignores_or_a_fault_after_the_end_is_refused() {
+        let base = "name = \"t\"\nduration_s = 10.0\n[[vehicles]]\nname = \"L\"\n[[vehicles]]\nname = \"F1\"\nparent = \"L\"\nslot_m = [-8.0, -4.0, 0.0]\n";
+        let with = |fault: &str| Scenario::from_toml(&format!("{base}[[faults]]\n{fault}"));
+        let e = with(
+            "action = \"kill\"\nvehicle = \"F1\"\nprocess = \"mpc\"\nat_s = 2.0\nfraction = 0.5\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert_eq!(e, "faults[0].fraction: is not used by a `kill` fault");
+        let e = with("action = \"blind\"\nvehicle = \"F1\"\nfrom_s = 12.0\nto_s = 13.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("faults[0].from_s: 12 s is after the run's end"),
+            "{e}"
+        );
+        assert!(with("action = \"blind\"\nvehicle = \"F1\"\nfrom_s = 2.0\nto_s = 3.0\n").is_ok());
+    }
 
     #[test]
     fn an_unknown_key_gets_the_nearest_known_one_or_the_list() {
