@@ -104,31 +104,64 @@ pub fn row(name: &str, s: &Summary) -> Row {
     }
 }
 
-/// A markdown table of the rows (`n/a` for a figure that does not exist),
-/// with what failed below it.
+/// A markdown table of the rows, a figure per line and a variant per column
+/// (so it fits a terminal: about 30 + 13 columns per variant), `n/a` for a
+/// figure that does not exist, with what failed below it.
 pub fn table(rows: &[Row], safe: f64) -> String {
-    let mut t = String::from(
-        "| variant | verdict | slot rms before m | slot rms during m | slot rms after m | min pair m | collisions | obstacle contacts | min clearance m | min fix fraction | min fix fraction in passage | min fix rate Hz | pose err p95 m |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
-    );
+    type Cell = fn(&Row, f64) -> String;
+    let figures: [(&str, Cell); 13] = [
+        ("verdict", |r, _| {
+            (if r.pass { "pass" } else { "FAIL" }).into()
+        }),
+        ("slot rms before (m)", |r, _| {
+            fmt_or_na(r.slot_error_rms_before_m, 2)
+        }),
+        ("slot rms during (m)", |r, _| {
+            fmt_or_na(r.slot_error_rms_during_m, 2)
+        }),
+        ("slot rms after (m)", |r, _| {
+            fmt_or_na(r.slot_error_rms_after_m, 2)
+        }),
+        ("min pair (m)", |r, safe| {
+            let below = r.min_pair_distance_m.is_some_and(|m| m < safe);
+            format!(
+                "{}{}",
+                fmt_or_na(r.min_pair_distance_m, 2),
+                if below { " < safe" } else { "" }
+            )
+        }),
+        ("collisions", |r, _| r.collisions.to_string()),
+        ("obstacle contacts", |r, _| r.obstacle_contacts.to_string()),
+        ("min clearance (m)", |r, _| {
+            fmt_or_na(r.min_obstacle_clearance_m, 2)
+        }),
+        ("min fix fraction", |r, _| {
+            fmt_or_na(r.min_visible_fraction, 3)
+        }),
+        ("  in the passage", |r, _| {
+            fmt_or_na(r.min_visible_fraction_in_passage, 3)
+        }),
+        ("min fix rate (Hz)", |r, _| fmt_or_na(r.min_fix_rate_hz, 2)),
+        ("pose error p95 (m)", |r, _| {
+            fmt_or_na(r.pose_error_p95_m, 2)
+        }),
+        ("min pair between", |r, _| r.min_pair.clone()),
+    ];
+    let mut t = String::from("| figure |");
     for r in rows {
-        let below = r.min_pair_distance_m.is_some_and(|m| m < safe);
-        t.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {}{} | {} | {} | {} | {} | {} | {} | {} |\n",
-            r.variant,
-            if r.pass { "pass" } else { "FAIL" },
-            fmt_or_na(r.slot_error_rms_before_m, 2),
-            fmt_or_na(r.slot_error_rms_during_m, 2),
-            fmt_or_na(r.slot_error_rms_after_m, 2),
-            fmt_or_na(r.min_pair_distance_m, 2),
-            if below { " (below safe)" } else { "" },
-            r.collisions,
-            r.obstacle_contacts,
-            fmt_or_na(r.min_obstacle_clearance_m, 2),
-            fmt_or_na(r.min_visible_fraction, 3),
-            fmt_or_na(r.min_visible_fraction_in_passage, 3),
-            fmt_or_na(r.min_fix_rate_hz, 2),
-            fmt_or_na(r.pose_error_p95_m, 2),
-        ));
+        t.push_str(&format!(" {} |", r.variant));
+    }
+    t.push_str("\n|---|");
+    for _ in rows {
+        t.push_str("---|");
+    }
+    t.push('\n');
+    for (name, cell) in figures {
+        t.push_str(&format!("| {name} |"));
+        for r in rows {
+            t.push_str(&format!(" {} |", cell(r, safe)));
+        }
+        t.push('\n');
     }
     for r in rows.iter().filter(|r| !r.pass) {
         t.push_str(&format!("\n{} failed:\n", r.variant));

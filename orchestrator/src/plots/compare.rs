@@ -177,6 +177,13 @@ where
         let mut c = chart(&plot).build_cartesian_2d(x.clone(), y.clone())?;
         mesh(&mut c, "time (s)", y_desc, false)?;
         shade_passage(&mut c, &mut leg, d, &x, &y)?;
+        // The method (the first) is drawn last and widest, so that a
+        // variant that runs with it never hides it; the key keeps the order.
+        let width = |k: usize| if k == 0 { 4 } else { 2 };
+        for (k, s) in series.iter().enumerate().rev() {
+            let pts = pick(s).iter().map(|&(t, v)| (t, v.min(y.end)));
+            curve(&mut c, &mut leg, pts, colour(k), width(k), None)?;
+        }
         for (k, s) in series.iter().enumerate() {
             let max = pick(s).iter().map(|p| p.1).fold(0.0, f64::max);
             let label = if max > y.end {
@@ -184,8 +191,7 @@ where
             } else {
                 s.name.clone()
             };
-            let pts = pick(s).iter().map(|&(t, v)| (t, v.min(y.end)));
-            curve(&mut c, &mut leg, pts, colour(k), 3, Some(&label))?;
+            leg.push((label, Key::Line(colour(k), width(k))));
         }
         if i == 1 {
             safe_line(&mut c, &mut leg, d, &x, true)?;

@@ -17,7 +17,8 @@ where
         Fig::TrajectoriesXy => draw_xy(d, &body),
         Fig::TrajectoriesXz => draw_xz(d, &body),
         Fig::ObstacleDistance => draw_obstacle_distance(d, &body),
-        Fig::PairDistances => draw_pairs(d, &body),
+        Fig::ParentDistances => draw_pairs(d, &body, true),
+        Fig::PairDistances => draw_pairs(d, &body, false),
         Fig::MinDistance => draw_min_distance(d, &body),
         Fig::SlotError => draw_slot_error(d, &body),
     }
@@ -213,14 +214,72 @@ where
     let mut leg = Legend::new();
     let mut c = chart(&plot).build_cartesian_2d(n, -z.end..-z.start)?;
     mesh(&mut c, "north x (m)", "depth z (m), down positive", true)?;
+    // Seen from the side, an obstacle the group passes beside (no track
+    // point inside its footprint) would look like a wall swum through:
+    // it is drawn as a pale band with its own key.
+    let (on_track, beside): (Vec<_>, Vec<_>) = d.obstacles.iter().partition(|o| {
+        let f = footprint(o);
+        d.tracks
+            .iter()
+            .any(|t| t.p.iter().any(|p| inside(&f, (p.x, p.y))))
+    });
     draw_obstacles(
         &mut c,
         &mut leg,
-        d.obstacles.iter().map(side_profile),
+        on_track.iter().map(|o| side_profile(o)),
         |(pn, pz)| (pn, -pz),
     )?;
+    let mut any_beside = false;
+    for o in &beside {
+        let pts: Vec<(f64, f64)> = side_profile(o)
+            .into_iter()
+            .map(|(pn, pz)| (pn, -pz))
+            .collect();
+        c.draw_series(std::iter::once(Polygon::new(pts, PALE_OBSTACLE.filled())))?;
+        any_beside = true;
+    }
+    if any_beside {
+        leg.push((
+            "obstacle, passed beside".to_string(),
+            Key::Fill(PALE_OBSTACLE),
+        ));
+    }
     draw_tracks(&mut c, &mut leg, d, |p| (p.x, -p.z))?;
+    // What the vertical shift asks for: D_b/2 × the progress toward the
+    // parent's track (eq. 5), filtered (eq. 9); a shift that stops part-way
+    // asks for part of D_b/2.
+    for (k, pts) in &d.depth_commands {
+        if pts.is_empty() {
+            continue;
+        }
+        let col = d.colour(*k);
+        c.draw_series(DashedLineSeries::new(
+            pts.iter().map(|&(n, z)| (n, -z)),
+            10,
+            6,
+            col.stroke_width(2),
+        ))?;
+        leg.push((
+            format!("{} depth asked (eq. 5)", d.tracks[*k].name),
+            Key::Dashed(col, 2, 7, 4),
+        ));
+    }
     draw_legend(&legend_area, &leg)
+}
+
+/// The fill of an obstacle the group passes beside, in a side view.
+const PALE_OBSTACLE: RGBColor = RGBColor(236, 238, 241);
+
+/// True when `p` lies inside the polygon `poly` (even-odd rule).
+fn inside(poly: &[(f64, f64)], p: (f64, f64)) -> bool {
+    let mut odd = false;
+    for (i, a) in poly.iter().enumerate() {
+        let b = poly[(i + 1) % poly.len()];
+        if (a.1 > p.1) != (b.1 > p.1) && p.0 < a.0 + (p.1 - a.1) * (b.0 - a.0) / (b.1 - a.1) {
+            odd = !odd;
+        }
+    }
+    odd
 }
 
 /// Obstacles as filled outlines.
@@ -412,24 +471,42 @@ pub(crate) fn runs_below(pts: &[(f64, f64)], top: f64) -> Vec<Vec<(f64, f64)>> {
     runs
 }
 
-/// Colour of pair `k` of `n`.
+/// Curve colours of the distance plots: tab10 without its red, which is the
+/// safe-distance line's.
+const PAIR_COLOURS: [RGBColor; 9] = [
+    RGBColor(31, 119, 180),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
+    RGBColor(188, 189, 34),
+    RGBColor(0, 0, 0),
+];
+
+/// Colour of pair `k` of `n`: distinct for up to 9, hues that keep clear
+/// of red beyond.
 pub(crate) fn pair_colour(k: usize, n: usize) -> RGBColor {
-    if n <= VEHICLE_COLOURS.len() {
-        VEHICLE_COLOURS[(k + 1) % VEHICLE_COLOURS.len()]
+    if n <= PAIR_COLOURS.len() {
+        PAIR_COLOURS[k % PAIR_COLOURS.len()]
     } else {
-        let c = HSLColor(k as f64 / n as f64, 0.75, 0.42).to_rgba();
+        let c = HSLColor(0.08 + 0.84 * k as f64 / n as f64, 0.75, 0.42).to_rgba();
         RGBColor(c.0, c.1, c.2)
     }
 }
 
+/// Fig. 9 (`parents`: each follower and its parent) or fig. 10 (every
+/// other pair).
 pub(crate) fn draw_pairs<DB: DrawingBackend>(
     d: &Data,
     area: &DrawingArea<DB, Shift>,
+    parents: bool,
 ) -> anyhow::Result<()>
 where
     DB::ErrorType: 'static,
 {
-    let pairs = d.pair_series();
+    let pairs = d.pair_series_where(|i, j| d.linked(i, j) == parents);
     let y = y_from_zero(
         pairs.iter().flat_map(|(_, s)| s).map(|p| p.1),
         d.safe_m,

@@ -43,10 +43,11 @@ use crate::analysis::track::{Track, Tracks};
 use shoal_scenario::Scenario;
 
 /// Figure names (file stems), in the order they are written.
-const FIGURES: [Fig; 6] = [
+const FIGURES: [Fig; 7] = [
     Fig::TrajectoriesXy,
     Fig::TrajectoriesXz,
     Fig::ObstacleDistance,
+    Fig::ParentDistances,
     Fig::PairDistances,
     Fig::MinDistance,
     Fig::SlotError,
@@ -81,6 +82,7 @@ enum Fig {
     TrajectoriesXy,
     TrajectoriesXz,
     ObstacleDistance,
+    ParentDistances,
     PairDistances,
     MinDistance,
     SlotError,
@@ -92,6 +94,7 @@ impl Fig {
             Fig::TrajectoriesXy => "trajectories_xy",
             Fig::TrajectoriesXz => "trajectories_xz",
             Fig::ObstacleDistance => "obstacle_distance",
+            Fig::ParentDistances => "parent_distances",
             Fig::PairDistances => "pair_distances",
             Fig::MinDistance => "min_distance",
             Fig::SlotError => "slot_error",
@@ -105,7 +108,8 @@ impl Fig {
                 "Trajectories in the vertical plane: depth against north (fig. 7)"
             }
             Fig::ObstacleDistance => "Distance of each follower to the nearest obstacle (fig. 8)",
-            Fig::PairDistances => "Distance between every pair of vehicles (figs. 9-10)",
+            Fig::ParentDistances => "Distance from each follower to its parent (fig. 9)",
+            Fig::PairDistances => "Distance between the other pairs of vehicles (fig. 10)",
             Fig::MinDistance => "Minimum distance between any two vehicles (fig. 11)",
             Fig::SlotError => "Slot error of each follower (ground truth)",
         }
@@ -179,6 +183,10 @@ struct Data {
     /// Times when any follower was shifting for an obstacle, s.
     avoiding_s: Vec<(f64, f64)>,
     t_end_s: f64,
+    /// Per follower whose shift moves it in depth (D_b ≠ 0): the depth its
+    /// planner asks for (the parent's depth plus the filtered slot's z,
+    /// eqs. (5), (9)) against its own north, m.
+    depth_commands: Vec<(usize, Vec<(f64, f64)>)>,
 }
 
 fn secs(ns: u64) -> f64 {
@@ -222,6 +230,25 @@ impl Data {
             .filter_map(|t| t.t_ns.last())
             .map(|&t| secs(t))
             .fold(0.0, f64::max);
+        let depth_commands = followers
+            .iter()
+            .filter(|f| scenario.vehicles[f.track].d_b_m.is_some_and(|d| d != 0.0))
+            .map(|f| {
+                let name = &scenario.vehicles[f.track].name;
+                let states =
+                    rec.samples::<ipc_types::PlannerState>(&format!("/{name}/planner_state"));
+                let pts = states
+                    .iter()
+                    .filter_map(|s| {
+                        let t = s.header.sim_time_ns;
+                        let (me, _) = tracks.get(f.track)?.at(t)?;
+                        let (parent, _) = tracks.get(f.parent)?.at(t)?;
+                        Some((me.x, parent.z + s.slot_filtered_m[2]))
+                    })
+                    .collect();
+                (f.track, pts)
+            })
+            .collect();
         Ok(Self {
             tracks,
             followers,
@@ -231,6 +258,7 @@ impl Data {
             collision_m: scenario.safety.collision_distance_m,
             avoiding_s,
             t_end_s,
+            depth_commands,
         })
     }
 
@@ -273,15 +301,28 @@ impl Data {
         (n.padded(0.04, 5.0), e.padded(0.08, 5.0))
     }
 
+    /// True when track `j` is track `i`'s parent or the other way round.
+    fn linked(&self, i: usize, j: usize) -> bool {
+        self.followers
+            .iter()
+            .any(|f| (f.track, f.parent) == (i, j) || (f.track, f.parent) == (j, i))
+    }
+
     /// Pairwise distance series over the first vehicle's sample times:
-    /// `(pair label, [(t s, distance m)])`.
-    fn pair_series(&self) -> Vec<(String, Vec<(f64, f64)>)> {
+    /// `(pair label, [(t s, distance m)])`, of the pairs `keep` takes.
+    fn pair_series_where(
+        &self,
+        keep: impl Fn(usize, usize) -> bool,
+    ) -> Vec<(String, Vec<(f64, f64)>)> {
         let mut out = Vec::new();
         let Some(master) = self.tracks.first() else {
             return out;
         };
         for i in 0..self.tracks.len() {
             for j in i + 1..self.tracks.len() {
+                if !keep(i, j) {
+                    continue;
+                }
                 let (a, b) = (&self.tracks[i], &self.tracks[j]);
                 let pts = master
                     .t_ns
@@ -295,6 +336,11 @@ impl Data {
             }
         }
         out
+    }
+
+    /// Every pair's distance series ([`Data::pair_series_where`]).
+    fn pair_series(&self) -> Vec<(String, Vec<(f64, f64)>)> {
+        self.pair_series_where(|_, _| true)
     }
 
     /// Slot error of a follower over time: `|p − (p_parent + R_parent·slot)|`.
@@ -406,7 +452,8 @@ half_height_m = 5.0
                 svg.display()
             );
             let key = match fig {
-                Fig::PairDistances => "L–F2",
+                Fig::ParentDistances => "L–F2",
+                Fig::PairDistances => "F1–F2",
                 Fig::MinDistance => "minimum pairwise distance",
                 _ => "F2",
             };

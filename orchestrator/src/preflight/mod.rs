@@ -128,9 +128,11 @@ pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
     // Parsed whatever the perception mode, so a bad key is never silent.
     let acoustic: camera_pose::acoustic::AcousticConfig = s.section("acoustic")?;
     acoustic.validate().map_err(anyhow::Error::msg)?;
-    // Every number within its physical range, defaults included.
-    let effective: toml::Table = toml::from_str(&effective_toml(s)?)?;
-    shoal_scenario::ranges::check(&effective)?;
+    // Every number within its physical range, defaults included (the seed,
+    // any u64, is no measure; a TOML table holds only i64).
+    let mut measured = effective(s)?;
+    measured.seed = 0;
+    shoal_scenario::ranges::check(&toml::Table::try_from(&measured)?)?;
     let field = sonar::ObstacleField::new(&obstacles).context("obstacles")?;
     check_start(s, &field, &camera, &beacons, &hull, &pose)?;
 
@@ -195,6 +197,11 @@ pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
 ///
 /// [`DERIVED_KEYS`]: shoal_scenario::DERIVED_KEYS
 pub fn effective_toml(s: &Scenario) -> anyhow::Result<String> {
+    Ok(effective(s)?.to_toml()?)
+}
+
+/// [`effective_toml`]'s scenario.
+pub fn effective(s: &Scenario) -> anyhow::Result<Scenario> {
     fn table<T: serde::Serialize>(cfg: &T) -> anyhow::Result<toml::Table> {
         Ok(toml::Table::try_from(cfg)?)
     }
@@ -218,7 +225,7 @@ pub fn effective_toml(s: &Scenario) -> anyhow::Result<String> {
     for (section, key, _) in shoal_scenario::DERIVED_KEYS {
         e.section_table_mut(section)?.remove(key);
     }
-    Ok(e.to_toml()?)
+    Ok(e)
 }
 
 /// Followers of followers this many levels below the leader need the

@@ -582,41 +582,42 @@ mod tests {
             },
         ];
         let t = render_table(&rows);
-        let row = |n: &str| {
-            t.lines()
-                .find(|l| l.starts_with(&format!("| {n} ")))
-                .unwrap_or_else(|| panic!("no row {n} in\n{t}"))
-                .to_string()
-        };
+        // A figure per line, a size per column.
         let cols = |l: &str| -> Vec<String> {
             l.trim_matches('|')
                 .split('|')
                 .map(|c| c.trim().to_string())
                 .collect()
         };
-        let header = cols(t.lines().next().unwrap());
-        assert_eq!(header.len(), HEADINGS.len());
-        // N = 25: 5 s CPU over 25 × 20 vehicle-s = 10 ms; 2x real time; 4 s
-        // outside the ticks;
-        // 1 MiB RSS, 0.5 MiB private; 1000 messages over 10 s.
-        let r25 = cols(&row("25"));
-        assert_eq!(r25.len(), HEADINGS.len());
-        assert_eq!(r25[1], "126");
-        assert_eq!(r25[2], "2.00x");
-        assert_eq!(r25[3], "4.00");
-        assert_eq!(r25[4], "10.0");
-        assert_eq!(r25[5], "1.00");
-        assert_eq!(r25[6], "0.500");
-        assert_eq!(r25[7], "100");
-        assert_eq!(r25[11], "97%");
-        assert_eq!(r25[12], "10.5");
-        assert_eq!(r25[13], "");
-        assert!(row("50").contains("UNHEALTHY"), "{t}");
-        let r100 = cols(&row("100"));
-        assert_eq!(r100.len(), HEADINGS.len(), "{t}");
-        assert_eq!(r100[1], "501");
+        let line = |h: &str| {
+            let l = t
+                .lines()
+                .find(|l| l.starts_with(&format!("| {h} ")))
+                .unwrap_or_else(|| panic!("no line {h} in\n{t}"));
+            cols(l)
+        };
+        assert_eq!(line("N"), ["N", "5", "25", "50", "100"]);
         assert!(
-            r100[13].starts_with("skipped: vehicles: the run needs 502"),
+            t.lines().all(|l| l.chars().count() <= 100),
+            "too wide:\n{t}"
+        );
+        // N = 25: 5 s CPU over 25 × 20 vehicle-s = 10 ms; 2x real time; 4 s
+        // outside the ticks; 1 MiB RSS, 0.5 MiB private; 1000 messages over 10 s.
+        let at25 = |h: &str| line(h)[2].clone();
+        assert_eq!(at25(HEADINGS[1]), "126");
+        assert_eq!(at25(HEADINGS[2]), "2.00x");
+        assert_eq!(at25(HEADINGS[3]), "4.00");
+        assert_eq!(at25(HEADINGS[4]), "10.0");
+        assert_eq!(at25(HEADINGS[5]), "1.00");
+        assert_eq!(at25(HEADINGS[6]), "0.500");
+        assert_eq!(at25(HEADINGS[7]), "100");
+        assert_eq!(at25(HEADINGS[11]), "97%");
+        assert_eq!(at25(HEADINGS[12]), "10.5");
+        assert!(!t.contains("N = 25:"), "{t}");
+        assert!(t.contains("N = 50: UNHEALTHY"), "{t}");
+        assert_eq!(line(HEADINGS[1])[4], "501");
+        assert!(
+            t.contains("N = 100: skipped: vehicles: the run needs 502"),
             "{t}"
         );
         // The ratio line: N = 50 (largest that ran) against N = 25.

@@ -147,49 +147,47 @@ pub(crate) fn cells(r: &Row) -> Vec<String> {
     }
 }
 
-/// The table as Markdown (also what is printed), and the cost-ratio line.
+/// The table as Markdown (also what is printed): a figure per line and a
+/// group size per column, so that it fits a terminal; each size's note
+/// below it, then the cost-ratio line.
 pub(crate) fn render_table(rows: &[Row]) -> String {
     let all: Vec<Vec<String>> = rows.iter().map(cells).collect();
-    // The note column is not padded (it may be long).
     let last = HEADINGS.len() - 1;
-    let width = |i: usize| {
-        all.iter()
-            .map(|c| c[i].chars().count())
-            .chain(std::iter::once(HEADINGS[i].chars().count()))
-            .max()
-            .unwrap_or(1)
-            .max(3)
-    };
-    let widths: Vec<usize> = (0..HEADINGS.len())
-        .map(|i| if i == last { 0 } else { width(i) })
+    let label_w = HEADINGS[..last]
+        .iter()
+        .map(|h| h.chars().count())
+        .max()
+        .unwrap_or(1);
+    let col_w: Vec<usize> = all
+        .iter()
+        .map(|c| {
+            c[..last]
+                .iter()
+                .map(|x| x.chars().count())
+                .max()
+                .unwrap_or(1)
+                .max(3)
+        })
         .collect();
-    let line = |cells: &[String]| {
-        let mut s = String::from("|");
-        for (i, c) in cells.iter().enumerate() {
-            if i == 0 || i == last {
-                let _ = write!(s, " {c:<w$} |", w = widths[i]);
-            } else {
-                let _ = write!(s, " {c:>w$} |", w = widths[i]);
+    let mut out = String::new();
+    for (i, h) in HEADINGS[..last].iter().enumerate() {
+        let _ = write!(out, "| {h:<label_w$} |");
+        for (c, w) in all.iter().zip(&col_w) {
+            let _ = write!(out, " {:>w$} |", c[i], w = *w);
+        }
+        out.push('\n');
+        if i == 0 {
+            let _ = write!(out, "| {} |", "-".repeat(label_w));
+            for w in &col_w {
+                let _ = write!(out, " {}: |", "-".repeat(w - 1));
             }
-        }
-        s.push('\n');
-        s
-    };
-    let mut out = line(&HEADINGS.map(String::from));
-    out.push('|');
-    for (i, w) in widths.iter().enumerate() {
-        let dashes = "-".repeat((*w).max(3));
-        if i == 0 || i == last {
-            let _ = write!(out, " {dashes} |");
-        } else {
-            let _ = write!(out, " {}: |", &dashes[1..]);
+            out.push('\n');
         }
     }
     out.push('\n');
-    for c in &all {
-        out.push_str(&line(c));
+    for c in all.iter().filter(|c| !c[last].is_empty()) {
+        let _ = writeln!(out, "N = {}: {}", c[0], c[last]);
     }
-    out.push('\n');
     out.push_str(&ratio_line(rows));
     out.push('\n');
     out
