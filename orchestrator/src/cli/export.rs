@@ -54,7 +54,7 @@ pub fn run(cmd: ExportCmd) -> anyhow::Result<()> {
         tracing::warn!("{n}");
     }
     if !cmd.quiet {
-        match print(&report, out) {
+        match print(&report, out, cmd.epoch) {
             // A closed pipe (`| head`) is the reader's choice, not an error.
             Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => return Err(e.into()),
             _ => {}
@@ -64,16 +64,21 @@ pub fn run(cmd: ExportCmd) -> anyhow::Result<()> {
 }
 
 /// Prints the closing table on stdout.
-fn print(report: &ExportReport, out: &Path) -> std::io::Result<()> {
+fn print(report: &ExportReport, out: &Path, epoch: bool) -> std::io::Result<()> {
     let mut o = std::io::stdout().lock();
     writeln!(
         o,
-        "{}: {} messages on {} channels, {:.1} s .. {:.1} s (sim time)",
+        "{}: {} messages on {} channels, {:.1} s .. {:.1} s (sim time{})",
         out.display(),
         report.messages(),
         report.channels.len(),
         report.span_ns.0 as f64 * 1e-9,
-        report.span_ns.1 as f64 * 1e-9
+        report.span_ns.1 as f64 * 1e-9,
+        if epoch {
+            ", written from the run's wall-clock start"
+        } else {
+            ""
+        }
     )?;
     writeln!(o, "{:<26} {:<26} {:>8}", "topic", "schema", "messages")?;
     for (topic, schema, n) in &report.channels {
