@@ -144,7 +144,7 @@ fn two_lockstep_runs_with_the_same_seed_give_the_same_messages() {
     let mut hashes = Vec::new();
     for (i, seed) in ["7", "7", "8"].iter().enumerate() {
         let out = tmp.path().join(format!("r{i}"));
-        let o = run_shoal(&[
+        run_shoal_ok(&[
             "run",
             "--quiet",
             sc.to_str().unwrap(),
@@ -153,7 +153,6 @@ fn two_lockstep_runs_with_the_same_seed_give_the_same_messages() {
             "--out",
             out.to_str().unwrap(),
         ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         hashes.push(
             Recording::open(&out.join("recording.mcap"))
                 .unwrap()
@@ -195,18 +194,16 @@ fn two_lockstep_runs_with_the_same_seed_give_the_same_messages() {
         "start_unix_ns {start}"
     );
     let eff = write_scenario(tmp.path(), "effective.toml", effective);
-    let o = run_shoal(&["check", "--resolved", eff.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run_shoal_ok(&["check", "--resolved", eff.to_str().unwrap()]);
     assert_eq!(String::from_utf8_lossy(&o.stdout), *effective);
     let out = tmp.path().join("again");
-    let o = run_shoal(&[
+    run_shoal_ok(&[
         "run",
         "--quiet",
         eff.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let again = Recording::open(&out.join("recording.mcap"))
         .unwrap()
         .message_hashes();
@@ -291,23 +288,21 @@ fn a_summary_from_the_recording_alone_matches_the_runs_own() {
     let tmp = tempfile::tempdir().unwrap();
     let sc = write_scenario(tmp.path(), "s.toml", &small_scenario("alone", 20.0));
     let out = tmp.path().join("r");
-    let o = run_shoal(&[
+    run_shoal_ok(&[
         "run",
         "--quiet",
         sc.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let rec = out.join("recording.mcap");
     let again = tmp.path().join("again");
-    let o = run_shoal(&[
+    run_shoal_ok(&[
         "summarize",
         rec.to_str().unwrap(),
         "--out",
         again.to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(again.join("plots").read_dir().unwrap().next().is_some());
     let (a, b) = (summary(&out), summary(&again));
     // What the recording holds is the same figure to the bit.
@@ -605,7 +600,7 @@ fn the_recorder_counts_what_it_could_not_record() {
     );
     let sc = write_scenario(tmp.path(), "s.toml", &text);
     let out = tmp.path().join("r");
-    let o = run_shoal(&[
+    run_shoal_ok(&[
         "run",
         "--quiet",
         "--mode",
@@ -614,7 +609,6 @@ fn the_recorder_counts_what_it_could_not_record() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = summary(&out);
     let dropped = s["recording"]["dropped"].as_u64().unwrap();
     let rec = Recording::open(&out.join("recording.mcap")).unwrap();

@@ -56,14 +56,13 @@ fn every_run_leaves_a_report_that_a_browser_shows_whole() {
     let tmp = tempfile::tempdir().unwrap();
     let sc = write_scenario(tmp.path(), "s.toml", &small_scenario("report", 20.0));
     let out = tmp.path().join("r");
-    let o = run_shoal(&[
+    run_shoal_ok(&[
         "run",
         "--quiet",
         sc.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let page = out.join("report.html");
     let html = std::fs::read_to_string(&page).unwrap();
     // Self-contained: nothing to fetch.
@@ -105,14 +104,13 @@ fn every_run_leaves_a_report_that_a_browser_shows_whole() {
 
     // `shoal summarize` writes the same page from the recording alone.
     let again = tmp.path().join("again");
-    let o = run_shoal(&[
+    run_shoal_ok(&[
         "summarize",
         "--quiet",
         out.join("recording.mcap").to_str().unwrap(),
         "--out",
         again.to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let dom = rendered_dom(&again.join("report.html"), 2000);
     assert_eq!(body_attr(&dom, "data-ready").as_deref(), Some("1"));
     assert!(dom.contains(&min_pair));

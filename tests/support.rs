@@ -50,6 +50,19 @@ pub fn run_shoal(args: &[&str]) -> Output {
     shoal().args(args).output().expect("spawn shoal")
 }
 
+/// Runs `shoal` with arguments, asserts that it succeeded (showing its
+/// stderr if not) and returns its output.
+pub fn run_shoal_ok(args: &[&str]) -> Output {
+    let o = run_shoal(args);
+    assert!(
+        o.status.success(),
+        "shoal {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o
+}
+
 /// The repository root.
 pub fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

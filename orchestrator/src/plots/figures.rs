@@ -471,25 +471,19 @@ pub(crate) fn runs_below(pts: &[(f64, f64)], top: f64) -> Vec<Vec<(f64, f64)>> {
     runs
 }
 
-/// Curve colours of the distance plots: tab10 without its red, which is the
-/// safe-distance line's.
-const PAIR_COLOURS: [RGBColor; 9] = [
-    RGBColor(31, 119, 180),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(23, 190, 207),
-    RGBColor(188, 189, 34),
-    RGBColor(0, 0, 0),
-];
-
 /// Colour of pair `k` of `n`: distinct for up to 9, hues that keep clear
 /// of red beyond.
 pub(crate) fn pair_colour(k: usize, n: usize) -> RGBColor {
-    if n <= PAIR_COLOURS.len() {
-        PAIR_COLOURS[k % PAIR_COLOURS.len()]
+    // The vehicles' palette from its second colour, without the red of the
+    // safe-distance line; the leader's black last.
+    let palette: Vec<RGBColor> = VEHICLE_COLOURS[1..]
+        .iter()
+        .copied()
+        .filter(|c| *c != VEHICLE_COLOURS[2])
+        .chain(std::iter::once(VEHICLE_COLOURS[0]))
+        .collect();
+    if n <= palette.len() {
+        palette[k % palette.len()]
     } else {
         let c = HSLColor(0.08 + 0.84 * k as f64 / n as f64, 0.75, 0.42).to_rgba();
         RGBColor(c.0, c.1, c.2)
