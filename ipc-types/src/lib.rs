@@ -769,11 +769,13 @@ macro_rules! sample_table {
         }
 
         /// Evaluates `$body` with `$T` the sample type whose ros2msg schema
-        /// name is `$schema` (`"shoal_msgs/msg/Nav"`), or `$other` if none is.
+        /// name is `$schema` (`"shoal_msgs/msg/Nav"`, or the name recordings
+        /// made before it used, `"shoal/Nav"`), or `$other` if none is.
         #[macro_export]
         macro_rules! with_sample_type {
             ($d schema:expr, $d T:ident => $d body:expr, else $d other:expr) => {{
-                let schema: &str = $d schema;
+                let canonical = $d crate::schema::canonical_schema_name($d schema);
+                let schema: &str = &canonical;
                 $( if schema == <$d crate::$vty as $d crate::Described>::ROS_NAME {
                     #[allow(dead_code)]
                     type $d T = $d crate::$vty;
@@ -911,6 +913,11 @@ mod tests {
             );
         }
         assert_eq!(with_sample_type!("shoal_msgs/msg/Nope", T => 1, else 0), 0);
+        // Recordings made before the ROS 2 package names still resolve.
+        assert_eq!(
+            with_sample_type!("shoal/Truth", T => <T as Described>::ROS_NAME, else ""),
+            "shoal_msgs/msg/Truth"
+        );
         let mut n = 0;
         for_each_sample_type!(T => {
             check_layout::<T>();

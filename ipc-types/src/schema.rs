@@ -121,6 +121,15 @@ fn valid_field_name(name: &str) -> bool {
         && !name.ends_with('_')
 }
 
+/// A schema name as shoal writes it now: `shoal/Nav`, the name recordings
+/// used before the ROS 2 package form, is `shoal_msgs/msg/Nav`.
+pub fn canonical_schema_name(name: &str) -> std::borrow::Cow<'_, str> {
+    match name.strip_prefix("shoal/") {
+        Some(rest) if !rest.contains('/') => format!("shoal_msgs/msg/{rest}").into(),
+        _ => name.into(),
+    }
+}
+
 /// How a field names a nested type: `pkg/Type`, the `.msg` field form of
 /// the resource name `pkg/msg/Type` (ROS 2 writes the `msg/` only in the
 /// `MSG:` headers and the schema name).

@@ -74,6 +74,8 @@ pub fn run_and_summarize(
                 .chain()
                 .any(|c| matches!(c.downcast_ref(), Some(launch::RunError::Interrupted(_))));
             if interrupted && out.join("recording.mcap").exists() {
+                // A second Ctrl-C while the part that ran is summarised ends it.
+                launch::os::default_termination_signals();
                 match summarize_into(&out.join("recording.mcap"), out) {
                     Ok(s) => eprintln!(
                         "stopped at t = {:.1} s: the summary and plots of the part that ran are in {}",

@@ -319,7 +319,8 @@ fn copy(
                         }
                     }
                     Item::Metadata { name, values } => {
-                        if ros2 && name == rosbag2::RECORD_NAME {
+                        // An input's rosbag2 record counts that input only.
+                        if name == rosbag2::RECORD_NAME {
                             return Ok(());
                         }
                         if metadata_names.insert(name.clone()) {

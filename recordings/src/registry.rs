@@ -50,5 +50,6 @@ pub fn all_types() -> Vec<TypeInfo> {
 
 /// Looks a type up by its schema name.
 pub fn type_info_by_schema(name: &str) -> Option<TypeInfo> {
+    let name = ipc_types::schema::canonical_schema_name(name);
     all_types().into_iter().find(|t| t.schema_name == name)
 }

@@ -117,7 +117,24 @@ impl RecordingWriter {
     }
 
     /// Adds a channel carrying samples of type `T` on `topic`; returns its id.
+    /// Its offered QoS states the writer's default depth
+    /// ([`WriterOptions::qos_depth`]).
     pub fn add_channel<T: Sample>(&mut self, topic: &str) -> Result<u16, WriterError> {
+        let qos = self.qos.clone();
+        self.add_channel_qos::<T>(topic, qos)
+    }
+
+    /// [`RecordingWriter::add_channel`] with the keep-last `depth` this
+    /// channel's subscriber really has.
+    pub fn add_channel_with_depth<T: Sample>(
+        &mut self,
+        topic: &str,
+        depth: usize,
+    ) -> Result<u16, WriterError> {
+        self.add_channel_qos::<T>(topic, rosbag2::offered_qos_profiles(depth))
+    }
+
+    fn add_channel_qos<T: Sample>(&mut self, topic: &str, qos: String) -> Result<u16, WriterError> {
         let info = type_info::<T>();
         let schema_id = match self.schemas.get(info.schema_name) {
             Some(id) => *id,
@@ -132,14 +149,14 @@ impl RecordingWriter {
         };
         let mut meta = BTreeMap::new();
         meta.insert("shoal.type_name".to_string(), info.type_name.to_string());
-        meta.insert(rosbag2::OFFERED_QOS_PROFILES.to_string(), self.qos.clone());
+        meta.insert(rosbag2::OFFERED_QOS_PROFILES.to_string(), qos.clone());
         let id = self.writer.add_channel(schema_id, topic, "cdr", &meta)?;
         self.topics.insert(
             id,
             rosbag2::Topic {
                 name: topic.to_string(),
                 type_name: info.schema_name.to_string(),
-                qos: self.qos.clone(),
+                qos,
                 messages: 0,
             },
         );
@@ -164,14 +181,9 @@ impl RecordingWriter {
         seq: u64,
         bytes: &[u8],
     ) -> Result<(), WriterError> {
-        let Some(topic) = self.topics.get_mut(&channel) else {
+        if !self.topics.contains_key(&channel) {
             return Err(WriterError::UnknownChannel(channel));
-        };
-        topic.messages += 1;
-        self.span = Some(match self.span {
-            None => (sim_time_ns, sim_time_ns),
-            Some((a, b)) => (a.min(sim_time_ns), b.max(sim_time_ns)),
-        });
+        }
         self.buf.clear();
         self.buf.extend_from_slice(&CDR_HEADER);
         self.buf.extend_from_slice(bytes);
@@ -183,6 +195,13 @@ impl RecordingWriter {
         };
         self.writer.write_to_known_channel(&header, &self.buf)?;
         self.messages += 1;
+        if let Some(topic) = self.topics.get_mut(&channel) {
+            topic.messages += 1;
+        }
+        self.span = Some(match self.span {
+            None => (sim_time_ns, sim_time_ns),
+            Some((a, b)) => (a.min(sim_time_ns), b.max(sim_time_ns)),
+        });
         Ok(())
     }
 

@@ -22,6 +22,7 @@ def main(path):
     path = Path(path)
     counts = {}
     types = {}
+    first, last = None, None
     qos_depths = set()
     with AnyReader([path]) as reader:
         for c in reader.connections:
@@ -36,6 +37,8 @@ def main(path):
             if msg.header.sim_time_ns != t:
                 raise SystemExit(f"{c.topic}: header.sim_time_ns {msg.header.sim_time_ns} != timestamp {t}")
             counts[c.topic] = counts.get(c.topic, 0) + 1
+            first = t if first is None else min(first, t)
+            last = t if last is None else max(last, t)
 
     with open(path, "rb") as f:
         meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
@@ -52,6 +55,13 @@ def main(path):
             raise SystemExit(f"{topic}: serialized_metadata type differs")
     if info["message_count"] != sum(counts.values()):
         raise SystemExit(f"message_count {info['message_count']} != {sum(counts.values())}")
+    if info["relative_file_paths"] != [path.name] or [f["path"] for f in info["files"]] != [path.name]:
+        raise SystemExit(f"the bag's files are {info['relative_file_paths']}, not [{path.name!r}]")
+    if info["starting_time"]["nanoseconds_since_epoch"] != first or info["duration"]["nanoseconds"] != last - first:
+        raise SystemExit("serialized_metadata's time span differs from the messages'")
+    for name, t in listed.items():
+        if name not in counts and t["message_count"] != 0:
+            raise SystemExit(f"{name}: serialized_metadata counts {t['message_count']}, the file holds none")
     print(json.dumps({
         "messages": sum(counts.values()),
         "topics": len(counts),

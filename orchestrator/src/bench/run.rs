@@ -32,7 +32,7 @@ use crate::cli::ProcessArgs;
 use crate::launch::os as sys;
 use crate::launch::RunSettings;
 use crate::pipeline::run_and_summarize;
-use crate::preflight::load_scenario;
+use crate::preflight::load_scenario_with;
 
 /// Issue 7: the paper scenario in lockstep at ≥ 50× real time.
 const GOAL_RTF: f64 = 50.0;
@@ -348,13 +348,14 @@ fn one_run(
 
 /// Runs the benchmark and prints its tables.
 pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
-    let mut scenario = load_scenario(&cmd.scenario)?;
-    if let Some(s) = cmd.seed {
-        scenario.seed = s;
-    }
-    if let Some(d) = cmd.duration {
-        scenario.duration_s = d;
-    }
+    let scenario = load_scenario_with(&cmd.scenario, |s| {
+        if let Some(seed) = cmd.seed {
+            s.seed = seed;
+        }
+        if let Some(d) = cmd.duration {
+            s.duration_s = d;
+        }
+    })?;
     let stamp = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_millis())

@@ -30,10 +30,11 @@ pub struct CompareCmd {
 
 /// Runs every variant into OUT/<variant>/ and writes compare.md, .json, .png.
 pub fn run(cmd: CompareCmd) -> anyhow::Result<()> {
-    let mut base = preflight::load_scenario(&cmd.scenario)?;
-    if let Some(s) = cmd.seed {
-        base.seed = s;
-    }
+    let base = preflight::load_scenario_with(&cmd.scenario, |s| {
+        if let Some(seed) = cmd.seed {
+            s.seed = seed;
+        }
+    })?;
     let out = cmd.out.unwrap_or_else(|| {
         let secs = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)

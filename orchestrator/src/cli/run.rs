@@ -64,13 +64,14 @@ impl ProcessArgs {
 
 /// Runs the scenario, prints the closing table and the output directory.
 pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
-    let mut scenario = preflight::load_scenario(&cmd.scenario)?;
-    if let Some(s) = cmd.seed {
-        scenario.seed = s;
-    }
-    if let Some(d) = cmd.duration {
-        scenario.duration_s = d;
-    }
+    let scenario = preflight::load_scenario_with(&cmd.scenario, |s| {
+        if let Some(seed) = cmd.seed {
+            s.seed = seed;
+        }
+        if let Some(d) = cmd.duration {
+            s.duration_s = d;
+        }
+    })?;
     let out = cmd
         .out
         .clone()

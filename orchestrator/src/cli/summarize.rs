@@ -41,12 +41,29 @@ pub fn run(cmd: SummarizeCmd) -> anyhow::Result<()> {
     } else {
         out
     };
-    let summary = out.join("summary.json");
-    if summary.exists() && !cmd.force {
-        anyhow::bail!(
-            "{} exists: pass --force to replace it (and plots/), or choose --out (nothing was written)",
-            summary.display()
-        );
+    // What a summary writes; the recording beside them is never touched.
+    let outputs = ["summary.json", "plots", "report.html"].map(|n| out.join(n));
+    if let Some(there) = outputs.iter().find(|p| p.exists()) {
+        if !cmd.force {
+            anyhow::bail!(
+                "{} exists: pass --force to replace summary.json, plots/ and report.html, or choose --out (nothing was written)",
+                there.display()
+            );
+        }
+        for p in &outputs {
+            let gone = if p.is_dir() {
+                std::fs::remove_dir_all(p)
+            } else {
+                std::fs::remove_file(p)
+            };
+            if let Err(e) = gone {
+                if e.kind() != std::io::ErrorKind::NotFound {
+                    return Err(
+                        anyhow::Error::new(e).context(format!("cannot remove {}", p.display()))
+                    );
+                }
+            }
+        }
     }
     let s = pipeline::summarize_into(&cmd.recording, &out)?;
     if !cmd.quiet {

@@ -89,7 +89,7 @@ impl<W: std::io::Write + std::io::Seek> Converter<W> {
     /// A message's own timestamp for simulated time `ns`: shifted as the
     /// log times are.
     fn time(&self, ns: u64) -> Time {
-        Time::from_ns(ns + self.out.epoch_ns)
+        Time::from_ns(ns.saturating_add(self.out.epoch_ns))
     }
 
     /// The static scene (obstacles, vehicle models), at time `t0`.

@@ -266,8 +266,8 @@ impl<W: std::io::Write + std::io::Seek> FoxgloveWriter<W> {
         let header = mcap::records::MessageHeader {
             channel_id: *id,
             sequence: *count as u32,
-            log_time: log_time_ns + self.epoch_ns,
-            publish_time: log_time_ns + self.epoch_ns,
+            log_time: log_time_ns.saturating_add(self.epoch_ns),
+            publish_time: log_time_ns.saturating_add(self.epoch_ns),
         };
         self.writer.write_to_known_channel(&header, &self.buf)?;
         *count += 1;

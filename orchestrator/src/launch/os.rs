@@ -157,6 +157,17 @@ pub fn default_sigpipe() {
     }
 }
 
+/// Gives Ctrl-C and SIGTERM back their default (end the process): once a
+/// run has been interrupted, a second Ctrl-C during the work that follows
+/// (summarising what ran) ends it at once.
+pub fn default_termination_signals() {
+    // SAFETY: resetting a signal's disposition to its default has no memory effects.
+    unsafe {
+        libc::signal(libc::SIGINT, libc::SIG_DFL);
+        libc::signal(libc::SIGTERM, libc::SIG_DFL);
+    }
+}
+
 /// The one-minute load average (/proc/loadavg), printed beside benchmark
 /// figures so a reader sees how busy the machine was.
 pub fn load_average() -> Option<f64> {

@@ -25,13 +25,29 @@ const _: () = assert!(shoal_scenario::MAX_VEHICLES == ipc_types::MAX_VEHICLES);
 /// service's section as much as at the top, is placed in the file:
 /// `FILE:LINE: KEY: reason`.
 pub fn load_scenario(path: &Option<std::path::PathBuf>) -> anyhow::Result<Scenario> {
+    load_scenario_with(path, |_| {})
+}
+
+/// [`load_scenario`] with `adjust` (the command line's `--seed`,
+/// `--duration`) applied before the whole check, so that the check sees
+/// the scenario that will run.
+pub fn load_scenario_with(
+    path: &Option<std::path::PathBuf>,
+    adjust: impl Fn(&mut Scenario),
+) -> anyhow::Result<Scenario> {
     let Some(p) = path else {
-        return Scenario::paper().context("the embedded paper scenario is invalid");
+        let mut s = Scenario::paper().context("the embedded paper scenario is invalid")?;
+        adjust(&mut s);
+        return Ok(s);
     };
-    let s = Scenario::from_file(p)?;
     let file = p.display().to_string();
-    let text =
-        std::fs::read_to_string(p).map_err(|e| anyhow::anyhow!("cannot read {file}: {e}"))?;
+    // Read once: the lines an error names are those of the text checked.
+    let text = std::fs::read_to_string(p).map_err(|e| shoal_scenario::ScenarioError::Read {
+        path: file.clone(),
+        reason: e.to_string(),
+    })?;
+    let mut s = Scenario::from_toml(&text).map_err(|e| e.located(&file, &text))?;
+    adjust(&mut s);
     let mut probe = s.clone();
     match resolve(&mut probe) {
         Ok(()) => Ok(s),

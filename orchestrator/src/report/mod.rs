@@ -113,7 +113,10 @@ fn key_figures(s: &Summary) -> Vec<(&'static str, &'static str, String, Option<b
             "simulated",
             format!(
                 "{:.1} s in {:.1} s ({:.1}x real time), {}",
-                s.sim_time_s, s.wall_time_s, s.real_time_factor, s.mode
+                s.sim_time_s,
+                s.wall_time_s,
+                s.real_time_factor,
+                esc(&s.mode)
             ),
             None,
         ),

@@ -95,7 +95,8 @@ fn open_tap<T: Sample>(
     buffer: usize,
 ) -> anyhow::Result<Box<dyn Tap>> {
     let sub = rt.subscriber::<T>(service, limits, buffer)?;
-    let channel = writer.add_channel::<T>(topic)?;
+    // The depth the bag states is the buffer this subscriber really has.
+    let channel = writer.add_channel_with_depth::<T>(topic, buffer.clamp(1, limits.max_buffer))?;
     Ok(Box::new(TypedTap { sub, channel }))
 }
 
@@ -121,7 +122,7 @@ impl RecorderTask {
                 shoal_scenario::Compression::None => Compression::None,
             },
             chunk_bytes: scenario.recording.chunk_kib * 1024,
-            qos_depth: scenario.recording.buffer,
+            ..WriterOptions::default()
         };
         let mut writer = RecordingWriter::create(out, &opts)?;
         let mut meta = BTreeMap::new();
@@ -230,7 +231,7 @@ impl RecorderTask {
         // about a second of the run at any speed (a wall-clock period would
         // lose a minute of a run at 60x real time).
         if let Some(last) = self.batch.last() {
-            if last.sim_time_ns >= self.last_flush_sim_ns + FLUSH_PERIOD_SIM_NS {
+            if last.sim_time_ns >= self.last_flush_sim_ns.saturating_add(FLUSH_PERIOD_SIM_NS) {
                 writer
                     .flush()
                     .map_err(TaskError::failed("recording flush"))?;

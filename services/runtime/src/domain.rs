@@ -112,22 +112,30 @@ fn alive(pid: i32) -> bool {
     r == 0 || std::io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
 }
 
-/// The nodes alive in a run's domain, by name: after the run's own
-/// processes have ended, outside clients (a Python reader, a replay).
+/// The nodes in a run's domain that are not known dead, by name: after the
+/// run's own processes have ended, outside clients (a Python reader, a
+/// replay). A node still starting, one of another user, or a domain that
+/// cannot be listed counts as in use: nothing is removed from under it.
 pub fn alive_nodes(run_id: &str) -> Vec<String> {
     use iceoryx2::node::{NodeState, NodeView as _};
     use iceoryx2::prelude::{ipc, CallbackProgression, Node};
     let mut out = Vec::new();
-    let _ = Node::<ipc::Service>::list(&iceoryx_config(run_id), |state| {
-        if let NodeState::Alive(view) = state {
-            out.push(
+    let listed = Node::<ipc::Service>::list(&iceoryx_config(run_id), |state| {
+        match state {
+            NodeState::Alive(view) => out.push(
                 view.details()
                     .as_ref()
                     .map_or_else(|| "?".to_string(), |d| d.name().to_string()),
-            );
+            ),
+            NodeState::Dead(_) => {}
+            NodeState::Inaccessible(_) => out.push("(another user's node)".to_string()),
+            NodeState::Undefined(_) => out.push("(a node starting)".to_string()),
         }
         CallbackProgression::Continue
     });
+    if listed.is_err() && domain_root(run_id).exists() {
+        out.push("(the domain could not be listed)".to_string());
+    }
     out.sort();
     out
 }

@@ -265,7 +265,7 @@ pub fn validate(s: &Scenario) -> Result<(), ScenarioError> {
                 }
                 if f.action == FaultAction::Drop {
                     let p = need(f.fraction, key("fraction"), "a drop")?;
-                    if p > 1.0 {
+                    if !(0.0..=1.0).contains(&p) {
                         return Err(invalid(
                             key("fraction"),
                             format!("must be in [0, 1], got {p}"),

@@ -1209,10 +1209,33 @@ fn path_at(text: &str, offset: Option<usize>, with_key: bool) -> Option<String> 
     let mut header = String::new();
     let mut counts: HashMap<String, usize> = HashMap::new();
     let mut pos = 0usize;
+    // Brackets a value left open (an array over several lines), and its key.
+    let mut depth = 0i32;
+    let mut open_key: Option<String> = None;
+    let under = |header: &str, k: String| {
+        if header.is_empty() {
+            k
+        } else {
+            format!("{header}.{k}")
+        }
+    };
     for line in text.split_inclusive('\n') {
         let end = pos + line.len();
         let t = line.trim();
         let on_line = offset >= pos && (offset < end || end == text.len());
+        if depth > 0 {
+            // A continuation of the open value: its key's line, not a header.
+            if on_line {
+                return if with_key {
+                    open_key.clone()
+                } else {
+                    (!header.is_empty()).then_some(header)
+                };
+            }
+            depth += bracket_delta(t);
+            pos = end;
+            continue;
+        }
         if let Some(inner) = t.strip_prefix("[[").and_then(|r| r.split("]]").next()) {
             let name = clean_key(inner);
             let n = counts.entry(name.clone()).or_insert(0);
@@ -1232,17 +1255,25 @@ fn path_at(text: &str, offset: Option<usize>, with_key: bool) -> Option<String> 
             if on_line {
                 return Some(header);
             }
-        } else if on_line && with_key {
-            let key = t.split_once('=').map(|(k, _)| clean_key(k));
-            return match key {
-                Some(k) if !k.is_empty() && !t.starts_with('#') => Some(if header.is_empty() {
-                    k
-                } else {
-                    format!("{header}.{k}")
-                }),
-                _ if header.is_empty() => None,
-                _ => Some(header),
-            };
+        } else {
+            let kv = (!t.starts_with('#'))
+                .then(|| t.split_once('='))
+                .flatten()
+                .map(|(k, v)| (clean_key(k), v));
+            if on_line && with_key {
+                return match kv {
+                    Some((k, _)) if !k.is_empty() => Some(under(&header, k)),
+                    _ if header.is_empty() => None,
+                    _ => Some(header),
+                };
+            }
+            if let Some((k, v)) = kv {
+                let d = bracket_delta(v);
+                if d > 0 {
+                    depth = d;
+                    open_key = Some(under(&header, k));
+                }
+            }
         }
         if on_line {
             break;
@@ -1250,6 +1281,35 @@ fn path_at(text: &str, offset: Option<usize>, with_key: bool) -> Option<String> 
         pos = end;
     }
     (!header.is_empty()).then_some(header)
+}
+
+/// Opening minus closing brackets of a TOML value's text, outside strings
+/// and before a comment.
+fn bracket_delta(v: &str) -> i32 {
+    let mut d = 0;
+    let mut quote: Option<char> = None;
+    let mut escaped = false;
+    for c in v.chars() {
+        match quote {
+            Some(q) => {
+                if escaped {
+                    escaped = false;
+                } else if c == '\\' && q == '"' {
+                    escaped = true;
+                } else if c == q {
+                    quote = None;
+                }
+            }
+            None => match c {
+                '"' | '\'' => quote = Some(c),
+                '#' => break,
+                '[' => d += 1,
+                ']' => d -= 1,
+                _ => {}
+            },
+        }
+    }
+    d
 }
 
 fn clean_key(k: &str) -> String {
@@ -1338,6 +1398,17 @@ mod tests {
         assert_eq!(line_of(text, "nowhere"), None);
         let e = invalid("vehicles[1].parent", "bad").located("s.toml", text);
         assert_eq!(e.to_string(), "s.toml:6: vehicles[1].parent: bad");
+    }
+
+    #[test]
+    fn a_multi_line_array_is_one_key_not_a_header() {
+        let text = "[mission]\nwaypoints_ned_m = [\n  [100.0, 0.0, 10.0],\n  [200.0, 0.0, 10.0], # \"]\"\n]\nspeed_mps = 30.0\n";
+        assert_eq!(line_of(text, "mission.speed_mps"), Some(6));
+        assert_eq!(line_of(text, "mission.waypoints_ned_m"), Some(2));
+        assert_eq!(
+            key_at(text, text.find("[200").map(|o| o + 1)),
+            Some("mission.waypoints_ned_m".into())
+        );
     }
 
     #[test]

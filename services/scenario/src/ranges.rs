@@ -42,7 +42,7 @@ pub const RANGES: &[(&str, f64, f64, &str)] = &[
         "a coordinate",
     ),
     // Angles: beyond a turn, sin and cos lose precision for nothing.
-    ("vehicles[].start_yaw_deg", -360.0, 360.0, "an angle"),
+    ("vehicles[].start_yaw_deg", -720.0, 720.0, "an angle"),
     ("obstacles[].yaw_deg", -360.0, 360.0, "an angle"),
     ("camera.mount_rpy_deg", -360.0, 360.0, "an angle"),
     // On the hull.
