@@ -286,15 +286,7 @@ fn sigint_to_shoal_stops_every_child_and_leaves_no_shared_memory() {
 #[test]
 fn a_summary_from_the_recording_alone_matches_the_runs_own() {
     let tmp = tempfile::tempdir().unwrap();
-    let sc = write_scenario(tmp.path(), "s.toml", &small_scenario("alone", 20.0));
-    let out = tmp.path().join("r");
-    run_shoal_ok(&[
-        "run",
-        "--quiet",
-        sc.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let out = run_small(tmp.path(), "alone", 20.0);
     let rec = out.join("recording.mcap");
     let again = tmp.path().join("again");
     run_shoal_ok(&[

@@ -54,15 +54,7 @@ fn body_attr(dom: &str, attr: &str) -> Option<String> {
 #[test]
 fn every_run_leaves_a_report_that_a_browser_shows_whole() {
     let tmp = tempfile::tempdir().unwrap();
-    let sc = write_scenario(tmp.path(), "s.toml", &small_scenario("report", 20.0));
-    let out = tmp.path().join("r");
-    run_shoal_ok(&[
-        "run",
-        "--quiet",
-        sc.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let out = run_small(tmp.path(), "report", 20.0);
     let page = out.join("report.html");
     let html = std::fs::read_to_string(&page).unwrap();
     // Self-contained: nothing to fetch.

@@ -63,6 +63,25 @@ pub fn run_shoal_ok(args: &[&str]) -> Output {
     o
 }
 
+/// Runs the small scenario `name` of `duration_s` simulated seconds in
+/// lockstep into `dir/name` (asserting success); returns that directory.
+pub fn run_small(dir: &Path, name: &str, duration_s: f64) -> PathBuf {
+    let sc = write_scenario(
+        dir,
+        &format!("{name}.toml"),
+        &small_scenario(name, duration_s),
+    );
+    let out = dir.join(name);
+    run_shoal_ok(&[
+        "run",
+        "--quiet",
+        sc.to_str().unwrap_or_default(),
+        "--out",
+        out.to_str().unwrap_or_default(),
+    ]);
+    out
+}
+
 /// The repository root.
 pub fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

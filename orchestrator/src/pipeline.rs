@@ -21,9 +21,18 @@ pub const RUN_OUTPUTS: [&str; 7] = [
     "scenario.toml",
 ];
 
+/// What a summary writes into its directory (`shoal summarize --force`
+/// removes them, never the recording beside them).
+pub const SUMMARY_OUTPUTS: [&str; 3] = ["summary.json", "plots", "report.html"];
+
 /// Removes what an earlier run left in `out` ([`RUN_OUTPUTS`]), nothing else.
 pub fn clear_outputs(out: &Path) -> anyhow::Result<()> {
-    for name in RUN_OUTPUTS {
+    remove_all(out, &RUN_OUTPUTS)
+}
+
+/// Removes the files and directories `names` of `out` that exist.
+pub fn remove_all(out: &Path, names: &[&str]) -> anyhow::Result<()> {
+    for name in names {
         let p = out.join(name);
         let removed = if p.is_dir() {
             std::fs::remove_dir_all(&p)

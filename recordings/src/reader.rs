@@ -180,6 +180,26 @@ impl Recording {
         &self.metadata
     }
 
+    /// A value of the `shoal.run` record the recorder writes first
+    /// (`scenario_toml`, `effective_toml`, `mode`, `run_id`,
+    /// `start_unix_ns`, …).
+    pub fn run_meta(&self, key: &str) -> Option<&str> {
+        self.metadata
+            .get("shoal.run")
+            .and_then(|m| m.get(key))
+            .map(String::as_str)
+    }
+
+    /// True when shoal wrote the file: it has the `shoal.run` record or a
+    /// channel of a shoal sample type.
+    pub fn written_by_shoal(&self) -> bool {
+        self.metadata.contains_key("shoal.run")
+            || self
+                .channels
+                .iter()
+                .any(|c| crate::type_info_by_schema(&c.schema_name).is_some())
+    }
+
     /// True if the file was cut short (no footer, or a broken last chunk).
     pub fn truncated(&self) -> bool {
         self.truncated

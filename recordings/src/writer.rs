@@ -181,9 +181,10 @@ impl RecordingWriter {
         seq: u64,
         bytes: &[u8],
     ) -> Result<(), WriterError> {
-        if !self.topics.contains_key(&channel) {
+        // One lookup per message; the count goes up once the write is done.
+        let Some(topic) = self.topics.get_mut(&channel) else {
             return Err(WriterError::UnknownChannel(channel));
-        }
+        };
         self.buf.clear();
         self.buf.extend_from_slice(&CDR_HEADER);
         self.buf.extend_from_slice(bytes);
@@ -195,9 +196,7 @@ impl RecordingWriter {
         };
         self.writer.write_to_known_channel(&header, &self.buf)?;
         self.messages += 1;
-        if let Some(topic) = self.topics.get_mut(&channel) {
-            topic.messages += 1;
-        }
+        topic.messages += 1;
         self.span = Some(match self.span {
             None => (sim_time_ns, sim_time_ns),
             Some((a, b)) => (a.min(sim_time_ns), b.max(sim_time_ns)),

@@ -34,20 +34,14 @@ pub const ALL_INPUTS: &str = "all inputs";
 pub fn recorded_scenario(rec: &Recording) -> anyhow::Result<Scenario> {
     use anyhow::Context as _;
     let text = rec
-        .metadata()
-        .get("shoal.run")
-        .and_then(|m| m.get("scenario_toml"))
+        .run_meta("scenario_toml")
         .context("the recording has no shoal.run/scenario_toml metadata")?;
     Scenario::from_toml(text).context("the recorded scenario does not parse")
 }
 
 /// The run's mode as recorded (`lockstep` when the recording does not say).
 pub fn recorded_mode(rec: &Recording) -> String {
-    rec.metadata()
-        .get("shoal.run")
-        .and_then(|m| m.get("mode"))
-        .cloned()
-        .unwrap_or_else(|| "lockstep".to_string())
+    rec.run_meta("mode").unwrap_or("lockstep").to_string()
 }
 
 /// Percentile buckets standing in for a histogram: half the samples at the
@@ -216,12 +210,7 @@ pub fn outcome_of(rec: &Recording, scenario: &Scenario) -> RunOutcome {
     };
     let stats: Vec<StatsFile> = last.values().map(stats_file).collect();
     RunOutcome {
-        run_id: rec
-            .metadata()
-            .get("shoal.run")
-            .and_then(|m| m.get("run_id"))
-            .cloned()
-            .unwrap_or_default(),
+        run_id: rec.run_meta("run_id").unwrap_or_default().to_string(),
         recording: rec.path().to_path_buf(),
         wall_time_s,
         sim_time_s,

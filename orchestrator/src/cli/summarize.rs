@@ -29,41 +29,24 @@ pub struct SummarizeCmd {
 
 /// Runs `shoal summarize`.
 pub fn run(cmd: SummarizeCmd) -> anyhow::Result<()> {
-    let out = match cmd.out {
-        Some(d) => d,
-        None => cmd
-            .recording
+    let out = cmd.out.unwrap_or_else(|| {
+        cmd.recording
             .parent()
-            .map_or_else(|| PathBuf::from("."), PathBuf::from),
-    };
-    let out = if out.as_os_str().is_empty() {
-        PathBuf::from(".")
-    } else {
-        out
-    };
-    // What a summary writes; the recording beside them is never touched.
-    let outputs = ["summary.json", "plots", "report.html"].map(|n| out.join(n));
-    if let Some(there) = outputs.iter().find(|p| p.exists()) {
+            .filter(|p| !p.as_os_str().is_empty())
+            .map_or_else(|| PathBuf::from("."), PathBuf::from)
+    });
+    if let Some(there) = pipeline::SUMMARY_OUTPUTS
+        .iter()
+        .map(|n| out.join(n))
+        .find(|p| p.exists())
+    {
         if !cmd.force {
             anyhow::bail!(
                 "{} exists: pass --force to replace summary.json, plots/ and report.html, or choose --out (nothing was written)",
                 there.display()
             );
         }
-        for p in &outputs {
-            let gone = if p.is_dir() {
-                std::fs::remove_dir_all(p)
-            } else {
-                std::fs::remove_file(p)
-            };
-            if let Err(e) = gone {
-                if e.kind() != std::io::ErrorKind::NotFound {
-                    return Err(
-                        anyhow::Error::new(e).context(format!("cannot remove {}", p.display()))
-                    );
-                }
-            }
-        }
+        pipeline::remove_all(&out, &pipeline::SUMMARY_OUTPUTS)?;
     }
     let s = pipeline::summarize_into(&cmd.recording, &out)?;
     if !cmd.quiet {

@@ -70,23 +70,15 @@ pub struct ExportOptions {
 /// The run's wall-clock start, ns since the Unix epoch, as the recorder
 /// kept it (`shoal.run` / `start_unix_ns`).
 pub fn start_unix_ns(rec: &recordings::Recording) -> Option<u64> {
-    rec.metadata()
-        .get("shoal.run")
-        .and_then(|m| m.get("start_unix_ns"))
-        .and_then(|v| v.parse().ok())
+    rec.run_meta("start_unix_ns").and_then(|v| v.parse().ok())
 }
 
 /// Refuses a file shoal did not write: one with neither shoal's run
 /// metadata nor a channel of a shoal sample type (converting it would give
 /// an empty view and look like success).
 pub fn ensure_shoal_recording(rec: &recordings::Recording, path: &Path) -> anyhow::Result<()> {
-    let ours = rec.metadata().contains_key("shoal.run")
-        || rec
-            .channels()
-            .iter()
-            .any(|c| recordings::type_info_by_schema(&c.schema_name).is_some());
     anyhow::ensure!(
-        ours,
+        rec.written_by_shoal(),
         "{} is not a shoal recording: it has no `shoal.run` metadata and no channel of a shoal_msgs type (nothing was written)",
         path.display()
     );
@@ -323,11 +315,7 @@ impl ViewConfig {
             v.dedup();
             v
         };
-        let text = rec
-            .metadata()
-            .get("shoal.run")
-            .and_then(|m| m.get("scenario_toml"));
-        let scenario = match text.map(|t| Scenario::from_toml(t)) {
+        let scenario = match rec.run_meta("scenario_toml").map(Scenario::from_toml) {
             Some(Ok(s)) => Some(s),
             Some(Err(e)) => {
                 notes.push(format!("the recorded scenario does not parse ({e}): no obstacles, slots or lines of sight"));

@@ -40,13 +40,9 @@ pub fn load_scenario_with(
         adjust(&mut s);
         return Ok(s);
     };
-    let file = p.display().to_string();
     // Read once: the lines an error names are those of the text checked.
-    let text = std::fs::read_to_string(p).map_err(|e| shoal_scenario::ScenarioError::Read {
-        path: file.clone(),
-        reason: e.to_string(),
-    })?;
-    let mut s = Scenario::from_toml(&text).map_err(|e| e.located(&file, &text))?;
+    let (mut s, text) = Scenario::read_file(p)?;
+    let file = p.display().to_string();
     adjust(&mut s);
     let mut probe = s.clone();
     match resolve(&mut probe) {
@@ -116,41 +112,33 @@ fn place_error(e: anyhow::Error, file: &str, text: &str) -> anyhow::Error {
 /// names the key, or the pair of vehicles that cannot be kept apart.
 pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
     s.validate()?;
-    let plant: sim_plant::PlantConfig = s.section("plant")?;
-    plant.validate().context("plant")?;
-    let nav: sim_plant::nav::NavConfig = s.section("nav")?;
-    nav.validate().context("nav")?;
-    let sonar_cfg: sonar::SonarConfig = s.section("sonar")?;
-    sonar_cfg.validate().context("sonar")?;
+    // Parsed whatever the perception mode (the acoustic section too), so a
+    // bad key is never silent.
+    let sec = Sections::parse(s)?;
+    sec.plant.validate().context("plant")?;
+    sec.nav.validate().context("nav")?;
+    sec.sonar.validate().context("sonar")?;
     let obstacles: Vec<sonar::Obstacle> = s.obstacles_as()?;
     for (i, o) in obstacles.iter().enumerate() {
         o.validate().with_context(|| format!("obstacles[{i}]"))?;
     }
-    let camera: camera_pose::CameraConfig = s.section("camera")?;
+    let (camera, beacons, hull, pose) = (&sec.camera, &sec.beacons, &sec.hull, &sec.pose);
     camera.validate().context("camera")?;
-    let beacons: camera_pose::BeaconLayout = s.section("beacons")?;
     beacons.validate().context("beacons")?;
-    let hull: camera_pose::HullConfig = s.section("hull")?;
     hull.validate().context("hull")?;
-    let pose: camera_pose::PoseConfig = s.section("pose")?;
     pose.validate().context("pose")?;
-    camera_pose::PoseEstimator::new(&pose, &camera, &beacons).context("pose")?;
-    let mission: planner::LeaderConfig = s.section("mission")?;
-    mission.validate().context("mission")?;
-    let follower: planner::FollowerConfig = s.section("follower")?;
-    follower.validate().context("follower")?;
-    let mpc_cfg: mpc::MpcConfig = s.section("mpc")?;
-    mpc_cfg.validate().context("mpc")?;
-    // Parsed whatever the perception mode, so a bad key is never silent.
-    let acoustic: camera_pose::acoustic::AcousticConfig = s.section("acoustic")?;
-    acoustic.validate().map_err(anyhow::Error::msg)?;
+    camera_pose::PoseEstimator::new(pose, camera, beacons).context("pose")?;
+    sec.mission.validate().context("mission")?;
+    sec.follower.validate().context("follower")?;
+    sec.mpc.validate().context("mpc")?;
+    sec.acoustic.validate().map_err(anyhow::Error::msg)?;
     // Every number within its physical range, defaults included (the seed,
     // any u64, is no measure; a TOML table holds only i64).
-    let mut measured = effective(s)?;
+    let mut measured = sec.fill(s)?;
     measured.seed = 0;
     shoal_scenario::ranges::check(&toml::Table::try_from(&measured)?)?;
     let field = sonar::ObstacleField::new(&obstacles).context("obstacles")?;
-    check_start(s, &field, &camera, &beacons, &hull, &pose)?;
+    check_start(s, &field, camera, beacons, hull, pose)?;
 
     let slots: Vec<FollowerSlot> = s
         .vehicles
@@ -218,30 +206,70 @@ pub fn effective_toml(s: &Scenario) -> anyhow::Result<String> {
 
 /// [`effective_toml`]'s scenario.
 pub fn effective(s: &Scenario) -> anyhow::Result<Scenario> {
-    fn table<T: serde::Serialize>(cfg: &T) -> anyhow::Result<toml::Table> {
-        Ok(toml::Table::try_from(cfg)?)
+    Sections::parse(s)?.fill(s)
+}
+
+/// Every service section of a scenario, parsed into its service's typed
+/// config (defaults filled in).
+struct Sections {
+    plant: sim_plant::PlantConfig,
+    nav: sim_plant::nav::NavConfig,
+    sonar: sonar::SonarConfig,
+    camera: camera_pose::CameraConfig,
+    beacons: camera_pose::BeaconLayout,
+    hull: camera_pose::HullConfig,
+    pose: camera_pose::PoseConfig,
+    mission: planner::LeaderConfig,
+    follower: planner::FollowerConfig,
+    mpc: mpc::MpcConfig,
+    acoustic: camera_pose::acoustic::AcousticConfig,
+}
+
+impl Sections {
+    fn parse(s: &Scenario) -> Result<Self, shoal_scenario::ScenarioError> {
+        Ok(Self {
+            plant: s.section("plant")?,
+            nav: s.section("nav")?,
+            sonar: s.section("sonar")?,
+            camera: s.section("camera")?,
+            beacons: s.section("beacons")?,
+            hull: s.section("hull")?,
+            pose: s.section("pose")?,
+            mission: s.section("mission")?,
+            follower: s.section("follower")?,
+            mpc: s.section("mpc")?,
+            acoustic: s.section("acoustic")?,
+        })
     }
-    let mut e = s.clone();
-    e.plant = table(&s.section::<sim_plant::PlantConfig>("plant")?)?;
-    e.nav = table(&s.section::<sim_plant::nav::NavConfig>("nav")?)?;
-    e.sonar = table(&s.section::<sonar::SonarConfig>("sonar")?)?;
-    e.camera = table(&s.section::<camera_pose::CameraConfig>("camera")?)?;
-    e.beacons = table(&s.section::<camera_pose::BeaconLayout>("beacons")?)?;
-    e.hull = table(&s.section::<camera_pose::HullConfig>("hull")?)?;
-    e.pose = table(&s.section::<camera_pose::PoseConfig>("pose")?)?;
-    e.mission = table(&s.section::<planner::LeaderConfig>("mission")?)?;
-    if s.nav.contains_key("position_noise_m") {
-        e.mission.remove("position_fix_noise_m");
-    } else {
-        e.nav.remove("position_noise_m");
+
+    /// `s` with each service section replaced by its config written out
+    /// whole, less what [`effective_toml`] leaves out.
+    fn fill(&self, s: &Scenario) -> anyhow::Result<Scenario> {
+        fn table<T: serde::Serialize>(cfg: &T) -> anyhow::Result<toml::Table> {
+            Ok(toml::Table::try_from(cfg)?)
+        }
+        let mut e = s.clone();
+        e.plant = table(&self.plant)?;
+        e.nav = table(&self.nav)?;
+        e.sonar = table(&self.sonar)?;
+        e.camera = table(&self.camera)?;
+        e.beacons = table(&self.beacons)?;
+        e.hull = table(&self.hull)?;
+        e.pose = table(&self.pose)?;
+        e.mission = table(&self.mission)?;
+        if s.nav.contains_key("position_noise_m") {
+            e.mission.remove("position_fix_noise_m");
+        } else {
+            e.nav.remove("position_noise_m");
+        }
+        e.follower = table(&self.follower)?;
+        e.mpc = table(&self.mpc)?;
+        e.acoustic = table(&self.acoustic)?;
+        for (section, key, _) in shoal_scenario::DERIVED_KEYS {
+            e.section_table_mut(section)?.remove(key);
+        }
+        Ok(e)
     }
-    e.follower = table(&s.section::<planner::FollowerConfig>("follower")?)?;
-    e.mpc = table(&s.section::<mpc::MpcConfig>("mpc")?)?;
-    e.acoustic = table(&s.section::<camera_pose::acoustic::AcousticConfig>("acoustic")?)?;
-    for (section, key, _) in shoal_scenario::DERIVED_KEYS {
-        e.section_table_mut(section)?.remove(key);
-    }
-    Ok(e)
 }
 
 /// Followers of followers this many levels below the leader need the

@@ -20,7 +20,7 @@ use recordings::Recording;
 use shoal_runtime::{ChannelLimits, Mode, Publisher, Subscriber};
 use shoal_scenario::{ProcessKind, ProcessSpec, Scenario};
 
-use crate::analysis::from_recording::recorded_scenario;
+use crate::analysis::from_recording::{recorded_mode, recorded_scenario};
 use crate::launch::os as sys;
 use crate::launch::supervisor::Supervisor;
 use crate::launch::{wait_done, wait_ready, Ports};
@@ -329,11 +329,7 @@ pub fn rerun(rec: &Recording, opts: &RerunOptions) -> anyhow::Result<RerunReport
             format!("--rerun {kind_name}: expected one of sim-plant, world, camera-pose, sonar, planner, mpc")
         })?;
     let base = recorded_scenario(rec)?;
-    let mode = rec
-        .metadata()
-        .get("shoal.run")
-        .and_then(|m| m.get("mode"))
-        .map_or("lockstep", String::as_str);
+    let mode = recorded_mode(rec);
     if mode != "lockstep" {
         bail!("only a lockstep recording can be re-run exactly (this one is {mode})");
     }

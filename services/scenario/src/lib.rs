@@ -1328,12 +1328,19 @@ impl Scenario {
     /// Reads and validates a scenario file.
     /// Every error is placed in the file ([`ScenarioError::located`]).
     pub fn from_file(path: &std::path::Path) -> Result<Self, ScenarioError> {
+        Self::read_file(path).map(|(s, _)| s)
+    }
+
+    /// [`Scenario::from_file`], with the text it was read from (to place
+    /// the errors of later checks in the same text).
+    pub fn read_file(path: &std::path::Path) -> Result<(Self, String), ScenarioError> {
         let file = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read {
             path: file.clone(),
             reason: e.to_string(),
         })?;
-        Self::from_toml(&text).map_err(|e| e.located(&file, &text))
+        let s = Self::from_toml(&text).map_err(|e| e.located(&file, &text))?;
+        Ok((s, text))
     }
 }
 

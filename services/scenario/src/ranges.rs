@@ -268,16 +268,7 @@ fn numbers(path: &str, pattern: &str, value: &toml::Value, out: &mut Vec<(String
     match value {
         toml::Value::Float(x) => out.push((path.to_string(), pattern.to_string(), *x)),
         toml::Value::Integer(i) => out.push((path.to_string(), pattern.to_string(), *i as f64)),
-        toml::Value::Table(t) => {
-            for (k, v) in t {
-                let (p, q) = if path.is_empty() {
-                    (k.clone(), k.clone())
-                } else {
-                    (format!("{path}.{k}"), format!("{pattern}.{k}"))
-                };
-                numbers(&p, &q, v, out);
-            }
-        }
+        toml::Value::Table(t) => table_numbers(path, pattern, t, out),
         toml::Value::Array(a) => {
             for (i, v) in a.iter().enumerate() {
                 if v.is_table() {
@@ -292,12 +283,28 @@ fn numbers(path: &str, pattern: &str, value: &toml::Value, out: &mut Vec<(String
     }
 }
 
+fn table_numbers(path: &str, pattern: &str, t: &toml::Table, out: &mut Vec<(String, String, f64)>) {
+    for (k, v) in t {
+        let (p, q) = if path.is_empty() {
+            (k.clone(), k.clone())
+        } else {
+            (format!("{path}.{k}"), format!("{pattern}.{k}"))
+        };
+        numbers(&p, &q, v, out);
+    }
+}
+
+/// Every number of `doc`: (key, pattern, value).
+fn all_numbers(doc: &toml::Table) -> Vec<(String, String, f64)> {
+    let mut all = Vec::new();
+    table_numbers("", "", doc, &mut all);
+    all
+}
+
 /// Checks every number of an (effective) scenario document against
 /// [`RANGES`]; the error names the key.
 pub fn check(doc: &toml::Table) -> Result<(), ScenarioError> {
-    let mut all = Vec::new();
-    numbers("", "", &toml::Value::Table(doc.clone()), &mut all);
-    for (key, pattern, x) in all {
+    for (key, pattern, x) in all_numbers(doc) {
         if let Some((_, lo, hi, what)) = RANGES.iter().find(|r| r.0 == pattern) {
             if !(x >= *lo && x <= *hi) {
                 return Err(invalid(
@@ -319,8 +326,7 @@ pub fn check(doc: &toml::Table) -> Result<(), ScenarioError> {
 /// asks that a full scenario leaves none: a pattern that matches nothing
 /// checks nothing).
 pub fn unmatched(doc: &toml::Table) -> Vec<&'static str> {
-    let mut all = Vec::new();
-    numbers("", "", &toml::Value::Table(doc.clone()), &mut all);
+    let all = all_numbers(doc);
     RANGES
         .iter()
         .map(|r| r.0)
