@@ -21,13 +21,13 @@ impl Capsule {
     /// True if the segment `p`–`q` passes through the capsule (comes closer
     /// to its axis than `radius_m`).
     pub fn blocks_segment(&self, p: &Point3<f64>, q: &Point3<f64>) -> bool {
-        segment_segment_distance_sq(p, q, &self.a, &self.b) < self.radius_m * self.radius_m
+        segment_distance_sq(p, q, &self.a, &self.b) < self.radius_m * self.radius_m
     }
 }
 
 /// Squared distance between segments `p1`–`q1` and `p2`–`q2` (Ericson,
 /// *Real-Time Collision Detection*, §5.1.9), degenerate segments included.
-pub(crate) fn segment_segment_distance_sq(
+pub fn segment_distance_sq(
     p1: &Point3<f64>,
     q1: &Point3<f64>,
     p2: &Point3<f64>,
