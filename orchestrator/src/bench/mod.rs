@@ -4,3 +4,4 @@
 pub mod ipc;
 pub mod run;
 pub mod scale;
+pub mod vision;

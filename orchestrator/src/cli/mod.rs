@@ -110,6 +110,10 @@ enum BenchCmd {
     /// Cost against group size: N = 5, 25, 50, 100 in lockstep (processes,
     /// real-time factor, CPU per vehicle-second, memory, recorder rate).
     Scale(bench::scale::ScaleCmd),
+    /// The camera chain without processes: pose error from rendered images
+    /// against the point model over ranges and turbidities, and the cost
+    /// of a frame (render, detect, identify, PnP).
+    Vision(bench::vision::VisionCmd),
 }
 
 /// Parses the command line, runs the command, prints an error chain.
@@ -137,6 +141,7 @@ pub fn main() -> ExitCode {
         Cmd::Bench(BenchCmd::Ipc(cmd)) => bench::ipc::run(cmd),
         Cmd::Bench(BenchCmd::Run(cmd)) => bench::run::run(cmd),
         Cmd::Bench(BenchCmd::Scale(cmd)) => bench::scale::run(cmd),
+        Cmd::Bench(BenchCmd::Vision(cmd)) => bench::vision::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
