@@ -130,7 +130,7 @@ fn open_pubsub<T: Sample, S: Service>(
             .max_nodes(limits.max_nodes)
             .subscriber_max_buffer_size(limits.max_buffer)
             .history_size(limits.history)
-            .subscriber_max_borrowed_samples(2)
+            .subscriber_max_borrowed_samples(BORROWED_SAMPLES)
             .enable_safe_overflow(true)
             .open_or_create();
         match r {
@@ -148,6 +148,9 @@ fn open_pubsub<T: Sample, S: Service>(
         }
     }
 }
+
+/// Samples a subscriber may hold borrowed from shared memory at once.
+const BORROWED_SAMPLES: usize = 2;
 
 /// Attempts at opening a service that another process is creating.
 const OPEN_RETRIES: u32 = 200;
@@ -247,6 +250,48 @@ impl<T: Sample, S: Service> Publisher<T, S> {
         Ok(())
     }
 
+    /// Publishes a sample written in place: `fill` gets the loaned
+    /// shared-memory chunk itself, so a large sample (a camera frame) is
+    /// written once, where the subscriber will read it, and never copied.
+    /// The chunk holds the bytes of an earlier sample of this service (or
+    /// zeros): `fill` must write every field it means to publish. The
+    /// header is stamped after `fill` returns, so the publish time is when
+    /// the sample is complete. A sample with a non-finite value is refused
+    /// (the chunk goes back unsent).
+    pub fn publish_in_place(
+        &mut self,
+        ctx: &StepContext,
+        origin: Origin,
+        fill: impl FnOnce(&mut T),
+    ) -> Result<(), RuntimeError> {
+        let loan = self
+            .inner
+            .loan_uninit()
+            .map_err(|e| self.send_error(iceoryx2::port::SendError::from(e)))?;
+        #[allow(unsafe_code)]
+        // SAFETY: `T: Pod`, so every byte pattern is a valid `T`; the chunk
+        // lies in a shared-memory segment that the OS zero-filled when it was
+        // created and that has only ever held whole `T` values of this
+        // service since, so all of its bytes are initialised.
+        let mut out = unsafe { loan.assume_init() };
+        fill(out.payload_mut());
+        if !out.payload().is_finite() {
+            return Err(RuntimeError::NonFinite {
+                service: self.service.clone(),
+            });
+        }
+        let publish_mono_ns = mono_ns();
+        let h = out.payload_mut().header_mut();
+        h.seq = self.seq;
+        h.sim_time_ns = ctx.sim_time_ns;
+        h.origin_mono_ns = origin.mono_ns;
+        h.origin_sim_time_ns = origin.sim_time_ns;
+        h.publish_mono_ns = publish_mono_ns;
+        out.send().map_err(|e| self.send_error(e))?;
+        self.seq += 1;
+        Ok(())
+    }
+
     fn send_error(&self, e: iceoryx2::port::SendError) -> RuntimeError {
         RuntimeError::Io {
             service: self.service.clone(),
@@ -285,6 +330,9 @@ pub struct Subscriber<T: Sample, S: Service = ipc::Service> {
     service: String,
     mode: Mode,
     held: VecDeque<T>,
+    /// Samples borrowed from shared memory and not yet ready (the in-place
+    /// path, [`Subscriber::with_latest_in_place`]).
+    held_in_place: VecDeque<iceoryx2::sample::Sample<S, T, ()>>,
     /// Next expected sequence number of each publisher (a service may have
     /// several: the stats channel, a restarted process).
     next_seq: Vec<(u128, u64)>,
@@ -318,6 +366,7 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
             service: service.to_string(),
             mode,
             held: VecDeque::with_capacity(2 * limits.max_buffer),
+            held_in_place: VecDeque::with_capacity(BORROWED_SAMPLES),
             next_seq: Vec::new(),
             count_gaps: true,
             lost: 0,
@@ -379,25 +428,7 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
             let value: T = *sample.payload();
             let h = *value.header();
             let finite = value.is_finite();
-            {
-                let mut hops = self.hops.borrow_mut();
-                hops.latency
-                    .record_ns(taken.saturating_sub(h.publish_mono_ns));
-                match self.next_seq.iter_mut().find(|(p, _)| *p == publisher) {
-                    Some((_, n)) => {
-                        if h.seq > *n && self.count_gaps {
-                            self.lost += h.seq - *n;
-                            hops.lost += h.seq - *n;
-                        }
-                        *n = h.seq + 1;
-                    }
-                    None => self.next_seq.push((publisher, h.seq + 1)),
-                }
-                if !finite {
-                    self.rejected += 1;
-                    hops.rejected += 1;
-                }
-            }
+            self.account(publisher, &h, taken, finite);
             if !finite {
                 drop(sample);
                 tracing::warn!(service = %self.service, seq = h.seq, "rejected a sample with a non-finite value");
@@ -468,6 +499,77 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
         let mut last = None;
         self.take_ready(ctx, |v| last = Some(v))?;
         Ok(last)
+    }
+
+    /// Calls `f` on the newest ready sample in place, in shared memory (no
+    /// copy: the way to read a camera frame), if one arrived since the last
+    /// call; older ready samples are accounted for and released unread. A
+    /// sample that is not ready yet (lockstep) stays borrowed until it is.
+    /// Use this or the copying readers on one subscriber, not both.
+    pub fn with_latest_in_place<R>(
+        &mut self,
+        ctx: &StepContext,
+        f: impl FnOnce(&T) -> R,
+    ) -> Result<Option<R>, RuntimeError> {
+        while self.inner.has_samples().map_err(|e| RuntimeError::Io {
+            service: self.service.clone(),
+            source: Box::new(e),
+        })? {
+            if self.held_in_place.len() >= BORROWED_SAMPLES {
+                // Full: the oldest is superseded by the one queued behind it.
+                self.held_in_place.pop_front();
+            }
+            let received = self.inner.receive().map_err(|e| RuntimeError::Io {
+                service: self.service.clone(),
+                source: Box::new(e),
+            })?;
+            let Some(sample) = received else {
+                break;
+            };
+            let taken = mono_ns();
+            let publisher = sample.header().publisher_id().value();
+            let h = *sample.payload().header();
+            let finite = sample.payload().is_finite();
+            self.account(publisher, &h, taken, finite);
+            if finite {
+                self.held_in_place.push_back(sample);
+            } else {
+                tracing::warn!(service = %self.service, seq = h.seq, "rejected a sample with a non-finite value");
+            }
+        }
+        let ready = self
+            .held_in_place
+            .iter()
+            .take_while(|s| self.ready(ctx, s.payload()))
+            .count();
+        if ready == 0 {
+            return Ok(None);
+        }
+        // Release the older ready ones; read the newest where it lies.
+        self.held_in_place.drain(..ready - 1);
+        let newest = self.held_in_place.pop_front();
+        Ok(newest.map(|s| f(s.payload())))
+    }
+
+    /// Books one received sample: latency, sequence gaps, rejection.
+    fn account(&mut self, publisher: u128, h: &Header, taken: u64, finite: bool) {
+        let mut hops = self.hops.borrow_mut();
+        hops.latency
+            .record_ns(taken.saturating_sub(h.publish_mono_ns));
+        match self.next_seq.iter_mut().find(|(p, _)| *p == publisher) {
+            Some((_, n)) => {
+                if h.seq > *n && self.count_gaps {
+                    self.lost += h.seq - *n;
+                    hops.lost += h.seq - *n;
+                }
+                *n = h.seq + 1;
+            }
+            None => self.next_seq.push((publisher, h.seq + 1)),
+        }
+        if !finite {
+            self.rejected += 1;
+            hops.rejected += 1;
+        }
     }
 
     /// The newest sample regardless of its stamp (the clock).
@@ -590,5 +692,47 @@ mod tests {
         a.publish(nav(12.0), &ctx(300), origin).unwrap();
         assert_eq!(sub.drain_latest().unwrap().map(|v| v.depth_m), Some(12.0));
         assert_eq!(take(&mut sub, 1_000), vec![]);
+    }
+
+    #[test]
+    fn in_place_samples_are_stamped_held_until_ready_and_read_where_they_lie() {
+        let run = format!("inplace{}", std::process::id());
+        let _domain = Domain(run.clone());
+        let node = crate::domain_node(&run, "inplace-test").unwrap();
+        let service = format!("shoal/{run}/V/nav");
+        let limits = ChannelLimits::vehicle();
+        let mut publ = crate::node_publisher::<Nav, _>(&node, &service, &limits).unwrap();
+        let mut sub = Subscriber::<Nav>::open(&node, &service, &limits, 4, Mode::Lockstep).unwrap();
+        let origin = Origin {
+            mono_ns: 5,
+            sim_time_ns: 1,
+        };
+        for t in [0u64, 10, 20] {
+            publ.publish_in_place(&ctx(t), origin, |n| {
+                // The chunk may hold an earlier sample: write what we publish.
+                *n = nav(t as f64);
+            })
+            .unwrap();
+        }
+        let read = |sub: &mut Subscriber<Nav>, at: u64| {
+            sub.with_latest_in_place(&ctx(at), |n| {
+                (n.depth_m, n.header.seq, n.header.origin_mono_ns)
+            })
+            .unwrap()
+        };
+        // Ready at 15: samples 0 and 10; the newest is read, sample 20 stays borrowed.
+        assert_eq!(read(&mut sub, 15), Some((10.0, 1, 5)));
+        assert_eq!(read(&mut sub, 15), None);
+        assert_eq!(read(&mut sub, 25), Some((20.0, 2, 5)));
+        // A non-finite sample is refused on publish and never sent.
+        assert!(publ
+            .publish_in_place(&ctx(30), origin, |n| n.depth_m = f64::NAN)
+            .is_err());
+        assert_eq!(read(&mut sub, 1_000), None);
+        publ.publish_in_place(&ctx(40), origin, |n| *n = nav(4.0))
+            .unwrap();
+        assert_eq!(read(&mut sub, 1_000), Some((4.0, 3, 5)));
+        assert_eq!(sub.lost(), 0);
+        assert_eq!(sub.latency().count, 4);
     }
 }
