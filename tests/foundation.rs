@@ -506,10 +506,14 @@ fn live_graph(run_id: &str) -> BTreeMap<String, BTreeSet<String>> {
     graph
 }
 
-#[test]
-fn followers_planner_and_mpc_open_only_their_own_channels() {
+/// Runs `scenario` until the named nodes have opened their services, stops
+/// it, and returns the live service graph with the run's service prefix.
+fn graph_of(
+    scenario: &str,
+    nodes: &[&str],
+) -> (BTreeMap<String, BTreeSet<String>>, String, String) {
     let tmp = tempfile::tempdir().unwrap();
-    let sc = write_scenario(tmp.path(), "s.toml", &small_scenario("graph", 3000.0));
+    let sc = write_scenario(tmp.path(), "s.toml", scenario);
     let out = tmp.path().join("r");
     let mut child = shoal()
         .args([
@@ -528,16 +532,9 @@ fn followers_planner_and_mpc_open_only_their_own_channels() {
     let start = Instant::now();
     let graph = loop {
         let g = live_graph(&run_id);
-        let ready = [
-            "F1/planner",
-            "F1/mpc",
-            "F2/planner",
-            "F2/mpc",
-            "L/planner",
-            "F1/camera-pose",
-        ]
-        .iter()
-        .all(|n| g.get(*n).is_some_and(|s| s.len() >= 4));
+        let ready = nodes
+            .iter()
+            .all(|n| g.get(*n).is_some_and(|s| s.len() >= 4));
         if ready {
             break g;
         }
@@ -549,8 +546,28 @@ fn followers_planner_and_mpc_open_only_their_own_channels() {
     };
     signal(child.id(), libc::SIGINT);
     child.wait().unwrap();
-
     let prefix = format!("shoal/{run_id}/");
+    (graph, prefix, run_id)
+}
+
+/// True if `service` (under `prefix`) is `vehicle`'s own channel or one of
+/// the run's clock, done and stats services.
+fn own_or_clock(prefix: &str, service: &str, vehicle: &str) -> bool {
+    let rest = service.strip_prefix(prefix).unwrap_or(service);
+    rest.starts_with(&format!("{vehicle}/")) || rest == "clock" || rest == "done" || rest == "stats"
+}
+
+#[test]
+fn followers_planner_and_mpc_open_only_their_own_channels() {
+    let nodes = [
+        "F1/planner",
+        "F1/mpc",
+        "F2/planner",
+        "F2/mpc",
+        "L/planner",
+        "F1/camera-pose",
+    ];
+    let (graph, prefix, run_id) = graph_of(&small_scenario("graph", 3000.0), &nodes);
     for follower in ["F1", "F2"] {
         for proc in ["planner", "mpc"] {
             let node = format!("{follower}/{proc}");
@@ -578,6 +595,36 @@ fn followers_planner_and_mpc_open_only_their_own_channels() {
     }
     // The checker itself is live: sensors do read the world.
     assert!(graph["F1/camera-pose"].contains(&format!("{prefix}world")));
+    assert_domain_clean(&run_id);
+}
+
+#[test]
+fn with_images_camera_pose_reads_only_its_own_frame_and_the_renderer_reads_the_world() {
+    let nodes = [
+        "F1/camera-pose",
+        "F1/camera-sim",
+        "F2/camera-pose",
+        "F2/camera-sim",
+    ];
+    let (graph, prefix, run_id) = graph_of(&small_image_scenario("graph-img", 3000.0), &nodes);
+    for follower in ["F1", "F2"] {
+        let node = format!("{follower}/camera-pose");
+        for s in &graph[&node] {
+            assert!(
+                s.starts_with(&prefix) && own_or_clock(&prefix, s, follower),
+                "{node} opened {s}: not its own vehicle's channel"
+            );
+            assert!(
+                !s.ends_with("/truth") && !s.ends_with("/world"),
+                "{node} opened ground truth {s}"
+            );
+        }
+        assert!(graph[&node].contains(&format!("{prefix}{follower}/image")));
+        // The renderer is the sensor simulator: it reads the world.
+        let sim = format!("{follower}/camera-sim");
+        assert!(graph[&sim].contains(&format!("{prefix}world")));
+        assert!(graph[&sim].contains(&format!("{prefix}{follower}/image")));
+    }
     assert_domain_clean(&run_id);
 }
 

@@ -119,6 +119,15 @@ speed_mps = 1.0
     )
 }
 
+/// [`small_scenario`] with the camera's image model (camera-sim renders each
+/// follower's frames; six stages per frame, so a 0.01 s tick).
+pub fn small_image_scenario(name: &str, duration_s: f64) -> String {
+    format!(
+        "{}\n[rates]\ntick_s = 0.01\n\n[camera]\nmodel = \"image\"\n",
+        small_scenario(name, duration_s)
+    )
+}
+
 /// Writes a scenario into `dir` and returns its path.
 pub fn write_scenario(dir: &Path, file: &str, text: &str) -> PathBuf {
     let p = dir.join(file);

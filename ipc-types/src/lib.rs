@@ -429,19 +429,71 @@ impl SonarScan {
 }
 
 sample! {
-    /// Beacon pixels as the follower's camera sees its parent.
-    pub struct Beacons("shoal_msgs/msg/Beacons", "shoal.Beacons.v1", size = 184) {
+    /// Beacon pixels as the follower's camera sees its parent: with camera
+    /// images, the centroids of the blobs identified as the parent's
+    /// beacons (what was detected, never ground truth).
+    pub struct Beacons("shoal_msgs/msg/Beacons", "shoal.Beacons.v2", size = 192) {
         /// Common header.
         pub header: Header,
         /// Pixel coordinates `u0, v0, u1, v1, ...`, px (origin top-left).
         pub pixels_uv: [f64; 2 * MAX_BEACONS],
-        /// 1 if beacon i is visible in this frame.
+        /// 1 if beacon i is visible in this frame (identified, with images).
         pub visible: [u8; MAX_BEACONS],
         /// Number of beacons on the parent.
         pub count: u32,
         /// Number visible in this frame.
         pub visible_count: u32,
+        /// Blobs found in the image (every vehicle's lamps, any glare); 0
+        /// with the point model.
+        pub blobs: u32,
+        /// Identification: 0 identified (or the point model), 1 the parent
+        /// is not predicted in view, 2 too few blobs match its pattern,
+        /// 3 ambiguous (another pattern fits as well).
+        pub identification: u32,
     }
+}
+
+/// Most pixels of a camera frame (512 × 512, 8-bit mono: the paper's camera).
+pub const MAX_IMAGE_BYTES: usize = 512 * 512;
+
+sample! {
+    /// One camera frame: 8-bit mono, row by row, written in place into
+    /// shared memory by camera-sim and read in place by camera-pose. The
+    /// first `height_px × step_bytes` bytes of `data` are the image.
+    pub struct Image("shoal_msgs/msg/Image", "shoal.Image.v1", size = 40 + 16 + MAX_IMAGE_BYTES) {
+        /// Common header (its simulation time is the exposure's).
+        pub header: Header,
+        /// Width, px.
+        pub width_px: u32,
+        /// Height, px.
+        pub height_px: u32,
+        /// Bytes from one row to the next.
+        pub step_bytes: u32,
+        /// Frame number of this camera, from 0.
+        pub frame: u32,
+        /// The pixels, `mono8`.
+        pub data: [u8; MAX_IMAGE_BYTES],
+    }
+}
+
+impl Image {
+    /// The image's bytes (`height_px × step_bytes`, at most the buffer).
+    pub fn pixels(&self) -> &[u8] {
+        let n = (self.height_px as usize * self.step_bytes as usize).min(MAX_IMAGE_BYTES);
+        &self.data[..n]
+    }
+}
+
+/// `shoal/<run-id>/<vehicle>/image`: a follower's camera frames (only with
+/// `[camera] model = "image"`; not in [`Channel::ALL`], whose channels every
+/// vehicle or follower always has).
+pub fn image_service_name(run_id: &str, vehicle: &str) -> String {
+    format!("shoal/{run_id}/{vehicle}/image")
+}
+
+/// The MCAP topic of a follower's camera frames: `/<vehicle>/image`.
+pub fn image_topic(vehicle: &str) -> String {
+    format!("/{vehicle}/image")
 }
 
 sample! {
@@ -994,6 +1046,7 @@ mod tests {
         check_layout::<ProcessStats>();
         check_layout::<Event>();
         check_layout::<Mixed>();
+        check_layout::<Image>();
     }
 
     #[test]

@@ -149,7 +149,7 @@ pub fn run(cmd: VisionCmd) -> anyhow::Result<()> {
                 );
                 let t1 = Instant::now();
                 let blobs = detector.detect(&img, w, h);
-                let got = identifier.identify(blobs, &prior, true);
+                let got = identifier.identify(blobs, &prior, camera_pose::Prior::Tracking);
                 let fix = if got.failure.is_none() {
                     let e = est_img.estimate(&got.observation);
                     e.valid.then(|| {

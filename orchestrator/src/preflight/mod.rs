@@ -132,6 +132,13 @@ pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
     sec.follower.validate().context("follower")?;
     sec.mpc.validate().context("mpc")?;
     sec.acoustic.validate().map_err(anyhow::Error::msg)?;
+    sec.detect.validate().context("detect")?;
+    sec.optics.validate().context("optics")?;
+    if s.camera_model() == shoal_scenario::CameraModel::Image {
+        // The visibility the optics must produce (the renderer derives the
+        // water's attenuation from it) and the image's size.
+        camera_sim::Renderer::new(camera, beacons, hull, &sec.optics).context("optics")?;
+    }
     // Every number within its physical range, defaults included (the seed,
     // any u64, is no measure; a TOML table holds only i64).
     let mut measured = sec.fill(s)?;
@@ -223,6 +230,8 @@ struct Sections {
     follower: planner::FollowerConfig,
     mpc: mpc::MpcConfig,
     acoustic: camera_pose::acoustic::AcousticConfig,
+    optics: camera_sim::OpticsConfig,
+    detect: camera_pose::DetectConfig,
 }
 
 impl Sections {
@@ -239,6 +248,8 @@ impl Sections {
             follower: s.section("follower")?,
             mpc: s.section("mpc")?,
             acoustic: s.section("acoustic")?,
+            optics: s.section("optics")?,
+            detect: s.section("detect")?,
         })
     }
 
@@ -265,6 +276,8 @@ impl Sections {
         e.follower = table(&self.follower)?;
         e.mpc = table(&self.mpc)?;
         e.acoustic = table(&self.acoustic)?;
+        e.optics = table(&self.optics)?;
+        e.detect = table(&self.detect)?;
         for (section, key, _) in shoal_scenario::DERIVED_KEYS {
             e.section_table_mut(section)?.remove(key);
         }

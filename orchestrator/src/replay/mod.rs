@@ -206,7 +206,14 @@ fn channels_of(
                 .collect(),
             vec!["/world".into()],
         ),
-        ProcessKind::CameraPose => (vec!["/world".into()], vec![v("beacons"), v("leader_pose")]),
+        ProcessKind::CameraPose => {
+            let input = match scenario.camera_model() {
+                shoal_scenario::CameraModel::Point => "/world".to_string(),
+                shoal_scenario::CameraModel::Image => v("image"),
+            };
+            (vec![input], vec![v("beacons"), v("leader_pose")])
+        }
+        ProcessKind::CameraSim => (vec!["/world".into()], vec![v("image")]),
         ProcessKind::Sonar => (vec!["/world".into()], vec![v("sonar")]),
         ProcessKind::Planner => {
             let follower = scenario

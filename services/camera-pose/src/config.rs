@@ -68,9 +68,20 @@ pub struct CameraConfig {
     /// Standard deviation of the Gaussian pixel noise on each coordinate, px.
     /// Default 1.0.
     pub noise_px: f64,
-    /// The water's visibility: beacons farther than this from the camera are
-    /// not seen, m. Default 12.
+    /// The water's visibility, m. Default 12. With the point model, beacons
+    /// farther than this from the camera are not seen; with the image model
+    /// it sets the water's attenuation (see `camera_sim::OpticsConfig`), so
+    /// that a beacon at this range is just at the detector's threshold.
     pub visibility_range_m: f64,
+    /// What the camera gives camera-pose: `"point"` (the default; beacon
+    /// pixels projected from truth with `noise_px` and identities attached)
+    /// or `"image"` (a rendered 8-bit frame in which camera-pose finds and
+    /// identifies the beacons itself; a `camera-sim` process per follower).
+    pub model: shoal_scenario::CameraModel,
+    /// With the image model: frames recorded per second of simulated time,
+    /// at most `[rates] camera_hz` (every frame). Default 1 (about 0.1 MB/s
+    /// of compressed 512×512 frames per follower).
+    pub record_hz: f64,
 }
 
 impl Default for CameraConfig {
@@ -84,6 +95,8 @@ impl Default for CameraConfig {
             rate_hz: 10.0,
             noise_px: 1.0,
             visibility_range_m: 12.0,
+            model: shoal_scenario::CameraModel::Point,
+            record_hz: 1.0,
         }
     }
 }
@@ -121,6 +134,25 @@ impl CameraConfig {
             return Err(invalid(
                 "camera.noise_px",
                 format!("must be >= 0 and finite, got {}", self.noise_px),
+            ));
+        }
+        if !(self.record_hz > 0.0 && self.record_hz.is_finite()) {
+            return Err(invalid(
+                "camera.record_hz",
+                format!("must be positive and finite, got {}", self.record_hz),
+            ));
+        }
+        if self.model == shoal_scenario::CameraModel::Image
+            && (self.width_px as usize) * (self.height_px as usize) > ipc_types::MAX_IMAGE_BYTES
+        {
+            return Err(invalid(
+                "camera.width_px",
+                format!(
+                    "{}×{} px is more than an image sample holds ({} px)",
+                    self.width_px,
+                    self.height_px,
+                    ipc_types::MAX_IMAGE_BYTES
+                ),
             ));
         }
         if self.visibility_range_m.is_nan() || self.visibility_range_m <= 0.0 {

@@ -37,11 +37,24 @@ pub struct DetectConfig {
     pub gate_tracking_px: f64,
     /// Without a recent fix (acquisition, from the nominal slot): the same, px. Default 150.
     pub gate_acquire_px: f64,
+    /// After a lost frame the gate grows by this much per second since the
+    /// last fix (up to `gate_acquire_px`), px/s. Default 60.
+    pub gate_growth_px_per_s: f64,
+    /// A fix younger than this predicts the pattern's shape (a similarity
+    /// fit); an older one only its place (an affine fit), s. Default 1.
+    pub rigid_for_s: f64,
+    /// A new fix farther than this from the last one (plus
+    /// `max_relative_speed_mps` per second since it) is refused: the lamps
+    /// of another vehicle, not the parent, m. Default 0.5.
+    pub max_jump_m: f64,
+    /// How fast the parent may move relative to the follower, m/s. Default 2.
+    pub max_relative_speed_mps: f64,
     /// Residuals below this are as good as equal when two identifications
     /// are compared, px. Default 0.75.
     pub residual_floor_px: f64,
     /// Two different identifications whose residuals are within this ratio
-    /// are ambiguous: the frame gives no fix. Default 2.
+    /// (of the better one or `residual_floor_px`) are ambiguous: the frame
+    /// gives no fix. Default 2.
     pub ambiguity_ratio: f64,
     /// Accepted ratio of the parent's pattern's size in the image to the
     /// predicted one (square root of the affine map's area ratio) (a farther vehicle's smaller pattern is not the
@@ -60,6 +73,10 @@ impl Default for DetectConfig {
             max_elongation: 2.5,
             gate_tracking_px: 30.0,
             gate_acquire_px: 150.0,
+            gate_growth_px_per_s: 60.0,
+            rigid_for_s: 1.0,
+            max_jump_m: 0.5,
+            max_relative_speed_mps: 2.0,
             residual_floor_px: 0.75,
             ambiguity_ratio: 2.0,
             max_scale_ratio: 1.6,
@@ -85,6 +102,10 @@ impl DetectConfig {
         pos("detect.min_contrast_dn", self.min_contrast_dn)?;
         pos("detect.gate_tracking_px", self.gate_tracking_px)?;
         pos("detect.gate_acquire_px", self.gate_acquire_px)?;
+        pos("detect.gate_growth_px_per_s", self.gate_growth_px_per_s)?;
+        pos("detect.rigid_for_s", self.rigid_for_s)?;
+        pos("detect.max_jump_m", self.max_jump_m)?;
+        pos("detect.max_relative_speed_mps", self.max_relative_speed_mps)?;
         pos("detect.residual_floor_px", self.residual_floor_px)?;
         if !(self.grow_fraction > 0.0 && self.grow_fraction <= 1.0) {
             return Err(invalid(
@@ -342,6 +363,22 @@ fn quantile(h: &[u32; 256], total: u32, q: f64) -> f64 {
     255.0
 }
 
+/// How good the predicted pose handed to [`Identifier::identify`] is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Prior {
+    /// The previous frame's fix: the tracking gate, and the pattern must
+    /// match up to a shift, scale and roll.
+    Tracking,
+    /// An older fix, `age_s` old: the gate grows with the age (up to the
+    /// acquisition gate), and past `rigid_for_s` the pattern may distort.
+    Aged {
+        /// Seconds since the fix.
+        age_s: f64,
+    },
+    /// No fix yet: the formation's nominal slot, the acquisition gate.
+    Nominal,
+}
+
 /// Why identification gave no observation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NoMatch {
@@ -379,6 +416,19 @@ pub struct Identifier {
 }
 
 impl Identifier {
+    /// True if a fix at `fix_m` (the parent's position in the body frame)
+    /// can follow one at `last_m` made `age_s` earlier: farther means
+    /// another vehicle's lamps were taken for the parent's.
+    pub fn plausible(
+        &self,
+        last_m: &nalgebra::Vector3<f64>,
+        fix_m: &nalgebra::Vector3<f64>,
+        age_s: f64,
+    ) -> bool {
+        (fix_m - last_m).norm()
+            <= self.cfg.max_jump_m + self.cfg.max_relative_speed_mps * age_s.max(0.0)
+    }
+
     /// An identifier for the parent's `layout` seen by `camera`, needing
     /// `min_beacons` beacons (the pose solver's minimum).
     pub fn new(
@@ -396,12 +446,12 @@ impl Identifier {
     }
 
     /// Identifies the beacons among `blobs` given the parent's predicted pose
-    /// in the follower body frame; `tracking` selects the gate.
+    /// in the follower body frame, as good as `prior` says.
     pub fn identify(
         &self,
         blobs: &[Blob],
         predicted_parent_in_body: &Isometry3<f64>,
-        tracking: bool,
+        prior: Prior,
     ) -> Identification {
         let mut out = Identification {
             observation: BeaconObservation {
@@ -433,10 +483,14 @@ impl Identifier {
             return out;
         }
         let ks: Vec<usize> = (0..MAX_BEACONS).filter(|&k| in_view[k]).collect();
-        let gate = if tracking {
-            self.cfg.gate_tracking_px
-        } else {
-            self.cfg.gate_acquire_px
+        let (gate, rigid) = match prior {
+            Prior::Tracking => (self.cfg.gate_tracking_px, true),
+            Prior::Aged { age_s } => (
+                (self.cfg.gate_tracking_px + self.cfg.gate_growth_px_per_s * age_s)
+                    .min(self.cfg.gate_acquire_px),
+                age_s <= self.cfg.rigid_for_s,
+            ),
+            Prior::Nominal => (self.cfg.gate_acquire_px, false),
         };
         // Which blobs may be which beacon: those within the gate of its
         // predicted pixel.
@@ -463,6 +517,7 @@ impl Identifier {
             options: &options,
             min: self.min_beacons,
             max_scale: self.cfg.max_scale_ratio,
+            rigid,
             assign: [u8::MAX; MAX_BEACONS],
             best: Vec::new(),
             leaves: 0,
@@ -512,6 +567,9 @@ struct Search<'a> {
     options: &'a [Vec<u8>; MAX_BEACONS],
     min: usize,
     max_scale: f64,
+    /// Fit a similarity (shift, scale, roll: the prediction is recent and
+    /// good) rather than an affine map (an old or nominal prediction).
+    rigid: bool,
     assign: [u8; MAX_BEACONS],
     /// (matched, affine RMS residual px, assignment) of every complete one.
     best: Vec<(usize, f64, [u8; MAX_BEACONS])>,
@@ -562,8 +620,51 @@ impl Search<'_> {
                 n += 1;
             }
         }
-        affine_residual(&p[..n], &q[..n], self.max_scale)
+        if self.rigid {
+            similarity_residual(&p[..n], &q[..n], self.max_scale)
+        } else {
+            affine_residual(&p[..n], &q[..n], self.max_scale)
+        }
     }
+}
+
+/// RMS residual of the least-squares similarity (shift, scale, rotation)
+/// taking `p` onto `q`, px; `None` if it is degenerate or scales by more
+/// than `max_scale` either way.
+fn similarity_residual(p: &[[f64; 2]], q: &[[f64; 2]], max_scale: f64) -> Option<f64> {
+    let n = p.len();
+    if n < 2 {
+        return None;
+    }
+    let mean = |x: &[[f64; 2]]| {
+        let s = x.iter().fold([0.0, 0.0], |a, v| [a[0] + v[0], a[1] + v[1]]);
+        [s[0] / n as f64, s[1] / n as f64]
+    };
+    let (mp, mq) = (mean(p), mean(q));
+    let (mut spp, mut a, mut b) = (0.0, 0.0, 0.0);
+    for i in 0..n {
+        let (x, y) = (p[i][0] - mp[0], p[i][1] - mp[1]);
+        let (u, v) = (q[i][0] - mq[0], q[i][1] - mq[1]);
+        spp += x * x + y * y;
+        a += x * u + y * v;
+        b += x * v - y * u;
+    }
+    if spp < 1e-9 {
+        return None;
+    }
+    let (a, b) = (a / spp, b / spp);
+    let scale = a.hypot(b);
+    if !(scale <= max_scale && scale >= 1.0 / max_scale) {
+        return None;
+    }
+    let mut ss = 0.0;
+    for i in 0..n {
+        let (x, y) = (p[i][0] - mp[0], p[i][1] - mp[1]);
+        let du = q[i][0] - mq[0] - (a * x - b * y);
+        let dv = q[i][1] - mq[1] - (b * x + a * y);
+        ss += du * du + dv * dv;
+    }
+    Some((ss / n as f64).sqrt())
 }
 
 /// RMS residual of the least-squares affine map taking `p` onto `q`, px;

@@ -26,7 +26,9 @@ use camera_pose::{
     BeaconLayout, BeaconObservation, Camera, CameraConfig, Capsule, HullConfig, PoseConfig,
     PoseEstimator,
 };
-use ipc_types::{Beacons, Channel, LeaderPose, RunChannel, Sample, World};
+use camera_pose::{DetectConfig, Detector, Identifier, NoMatch, Prior};
+use ipc_types::{Beacons, Channel, Image, LeaderPose, RunChannel, Sample, World};
+use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use shoal_runtime::convert::{arr, seed_for, world_pose, wxyz};
@@ -37,11 +39,34 @@ use shoal_scenario::Scenario;
 
 /// Where this follower's parent estimate comes from.
 enum Source {
-    /// The camera and PnP (the paper's method).
+    /// The camera's point model and PnP: beacon pixels projected from the
+    /// world snapshot, identities attached.
     Camera,
+    /// The camera's image (`[camera] model = "image"`): blobs found and
+    /// identified in this follower's own frame, then PnP. Reads nothing but
+    /// the `image` channel.
+    Image(Box<ImageSource>),
     /// The acoustic-modem baseline.
     Acoustic(Modem),
 }
+
+/// The image side of camera-pose: its frame, and what it keeps between frames.
+struct ImageSource {
+    image_in: Subscriber<Image>,
+    detector: Detector,
+    identifier: Identifier,
+    /// The parent where the formation puts it (the nominal slot): the
+    /// prediction when no recent fix is held.
+    nominal: Isometry3<f64>,
+    /// The last valid fix: simulated time, s, and the parent in the body frame.
+    last_fix: Option<(f64, Isometry3<f64>)>,
+    /// A fix this young is the previous frame's: tracking, s.
+    track_for_s: f64,
+}
+
+/// A fix this young is the previous frame's (tracking), s: one and a half
+/// frames at the default 10 Hz.
+const TRACK_FOR_S: f64 = 0.15;
 
 pub struct CameraTask {
     source: Source,
@@ -52,7 +77,9 @@ pub struct CameraTask {
     index: usize,
     parent: usize,
     rng: ChaCha8Rng,
-    world_in: Subscriber<World>,
+    /// The world snapshot: read by the point model and the acoustic
+    /// baseline only (their sensor simulation); never with images.
+    world_in: Option<Subscriber<World>>,
     beacons_out: Publisher<Beacons>,
     pose_out: Publisher<LeaderPose>,
     world: Option<World>,
@@ -79,7 +106,29 @@ impl CameraTask {
         let hull: HullConfig = scenario.section("hull")?;
         let run = &rt.args().run_id;
         let lim = ChannelLimits::vehicle();
+        let model = scenario.camera_model();
+        let images = model == shoal_scenario::CameraModel::Image
+            && scenario.method.perception == shoal_scenario::Perception::Camera;
         let source = match scenario.method.perception {
+            shoal_scenario::Perception::Camera if model == shoal_scenario::CameraModel::Image => {
+                let detect: DetectConfig = scenario.section("detect")?;
+                let camera = Camera::new(&cam_cfg)?;
+                let slot = scenario.vehicles[index].slot_m.unwrap_or([0.0; 3]);
+                Source::Image(Box::new(ImageSource {
+                    image_in: rt.subscriber(
+                        &ipc_types::image_service_name(run, me),
+                        &ChannelLimits::image(),
+                        2,
+                    )?,
+                    detector: Detector::new(&detect)?,
+                    identifier: Identifier::new(&detect, &layout, &camera, pose_cfg.min_beacons),
+                    // The follower in its slot, heading as its parent: the
+                    // parent is at −slot in the follower's body frame.
+                    nominal: Isometry3::translation(-slot[0], -slot[1], -slot[2]),
+                    last_fix: None,
+                    track_for_s: TRACK_FOR_S,
+                }))
+            }
             shoal_scenario::Perception::Camera => Source::Camera,
             shoal_scenario::Perception::Acoustic => {
                 let cfg: AcousticConfig = scenario.section("acoustic")?;
@@ -97,11 +146,15 @@ impl CameraTask {
             index,
             parent,
             rng: ChaCha8Rng::seed_from_u64(seed_for(scenario.seed, index, 3)),
-            world_in: rt.subscriber(
-                &ipc_types::run_service_name(run, RunChannel::World),
-                &ChannelLimits::world(scenario.vehicles.len()),
-                2,
-            )?,
+            world_in: if images {
+                None
+            } else {
+                Some(rt.subscriber(
+                    &ipc_types::run_service_name(run, RunChannel::World),
+                    &ChannelLimits::world(scenario.vehicles.len()),
+                    2,
+                )?)
+            },
             beacons_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Beacons), &lim)?,
             pose_out: rt.publisher(&ipc_types::service_name(run, me, Channel::LeaderPose), &lim)?,
             world: None,
@@ -127,7 +180,16 @@ impl CameraTask {
 
 impl Task for CameraTask {
     fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
-        if let Some(w) = self.world_in.latest(ctx)? {
+        if matches!(self.source, Source::Image(_)) {
+            return self.step_image(ctx);
+        }
+        if let Some(w) = self
+            .world_in
+            .as_mut()
+            .map(|s| s.latest(ctx))
+            .transpose()?
+            .flatten()
+        {
             self.world = Some(w);
         }
         let Some(w) = self.world else {
@@ -182,7 +244,106 @@ impl Task for CameraTask {
 
         // From here on only the observation is used.
         let est = self.estimator.estimate(&obs);
-        let p = if est.valid {
+        self.publish_estimate(&est, true, ctx, origin)?;
+        Ok(())
+    }
+}
+
+impl CameraTask {
+    /// One frame of the image model: the newest frame of this follower's
+    /// own camera, read in place; blobs; which are the parent's beacons;
+    /// PnP. Nothing else is read.
+    fn step_image(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        let Source::Image(src) = &mut self.source else {
+            return Ok(());
+        };
+        let now = ctx.sim_time_s();
+        // The last fix predicts where the parent is, the better the younger
+        // (the formation holds it about there); the nominal slot only
+        // before the first fix.
+        let prior = match src.last_fix {
+            Some((t, p)) if now - t <= src.track_for_s => (p, Prior::Tracking),
+            Some((t, p)) => (p, Prior::Aged { age_s: now - t }),
+            None => (src.nominal, Prior::Nominal),
+        };
+        let (detector, identifier) = (&mut src.detector, &src.identifier);
+        let found = src.image_in.with_latest_in_place(ctx, |img| {
+            let (w, h) = (img.width_px as usize, img.height_px as usize);
+            let blobs = detector.detect(img.pixels(), w, h);
+            let id = identifier.identify(blobs, &prior.0, prior.1);
+            (id, blobs.len(), Origin::of(&img.header))
+        })?;
+        let Some((id, blobs, origin)) = found else {
+            return Ok(());
+        };
+        let fault = self.faults.frame(now, &mut self.rng);
+        if fault == FrameFault::Lost {
+            return Ok(());
+        }
+        let mut obs = id.observation;
+        let mut status = match id.failure {
+            None => 0,
+            Some(NoMatch::NotInView) => 1,
+            Some(NoMatch::TooFew) => 2,
+            Some(NoMatch::Ambiguous) => 3,
+        };
+        if fault == FrameFault::Blind {
+            obs = BeaconObservation {
+                count: obs.count,
+                ..BeaconObservation::default()
+            };
+            status = 2;
+        }
+        let mut b = Beacons::zeroed();
+        for i in 0..obs.count.min(ipc_types::MAX_BEACONS) {
+            b.pixels_uv[2 * i] = obs.pixels[i][0];
+            b.pixels_uv[2 * i + 1] = obs.pixels[i][1];
+            b.visible[i] = u8::from(obs.visible[i]);
+        }
+        b.count = obs.count as u32;
+        b.visible_count = obs.visible_count() as u32;
+        b.blobs = if fault == FrameFault::Blind {
+            0
+        } else {
+            blobs as u32
+        };
+        b.identification = status;
+        self.beacons_out.publish(b, ctx, origin)?;
+        // A fix that jumps farther from the last one than the parent can
+        // move is another vehicle's lamps: no fix this frame.
+        let last = src_last_fix(&self.source);
+        let plausible = |fix: &Isometry3<f64>| match (&self.source, last) {
+            (Source::Image(src), Some((t, p))) => {
+                src.identifier
+                    .plausible(&p.translation.vector, &fix.translation.vector, now - t)
+            }
+            _ => true,
+        };
+        let est = self.estimator.estimate(&obs);
+        let plausible = !est.valid || plausible(&est.parent_in_body);
+        if !plausible {
+            tracing::debug!(t_s = now, "fix refused: too far from the last one");
+            self.estimator.reset();
+        }
+        if self.publish_estimate(&est, plausible, ctx, origin)? {
+            if let Source::Image(src) = &mut self.source {
+                src.last_fix = Some((now, est.parent_in_body));
+            }
+        }
+        Ok(())
+    }
+
+    /// Publishes `leader_pose` for an estimate: the fix when it is valid
+    /// and `accept`ed, else "no fix" (never a wild guess: a non-finite fit
+    /// is an invalid one). Returns whether a fix went out.
+    fn publish_estimate(
+        &mut self,
+        est: &camera_pose::PoseEstimate,
+        accept: bool,
+        ctx: &StepContext,
+        origin: Origin,
+    ) -> Result<bool, TaskError> {
+        let p = if est.valid && accept {
             pose_sample(
                 true,
                 est.beacons_used,
@@ -197,14 +358,21 @@ impl Task for CameraTask {
             p.reprojection_rms_px = est.reprojection_rms_px;
             p
         };
-        // Never publish a wild guess: a non-finite fit is an invalid one.
         let p = if p.is_finite() {
             p
         } else {
             invalid_pose(est.beacons_used)
         };
         self.pose_out.publish(p, ctx, origin)?;
-        Ok(())
+        Ok(p.valid == 1)
+    }
+}
+
+/// The image source's last fix, if any.
+fn src_last_fix(source: &Source) -> Option<(f64, Isometry3<f64>)> {
+    match source {
+        Source::Image(src) => src.last_fix,
+        _ => None,
     }
 }
 

@@ -51,9 +51,12 @@ fn bench_frame(c: &mut Criterion) {
     let id = Identifier::new(&cfg, &layout, r.camera(), 4);
     let truth = scene[0].inverse() * scene[1];
     let blobs = det.detect(&img, w, h).to_vec();
-    assert!(id.identify(&blobs, &truth, true).failure.is_none());
+    assert!(id
+        .identify(&blobs, &truth, camera_pose::Prior::Tracking)
+        .failure
+        .is_none());
     c.bench_function("identify_4", |b| {
-        b.iter(|| black_box(id.identify(black_box(&blobs), &truth, true)))
+        b.iter(|| black_box(id.identify(black_box(&blobs), &truth, camera_pose::Prior::Tracking)))
     });
     let mut est = PoseEstimator::new(&PoseConfig::default(), &cam_cfg, &layout).unwrap();
     c.bench_function("frame_512", |b| {
@@ -62,7 +65,7 @@ fn bench_frame(c: &mut Criterion) {
             seed += 1;
             r.render(&scene, 0, Some(1), seed, &mut img);
             let blobs = det.detect(&img, w, h);
-            let got = id.identify(blobs, &truth, true);
+            let got = id.identify(blobs, &truth, camera_pose::Prior::Tracking);
             black_box(est.estimate(&got.observation))
         })
     });

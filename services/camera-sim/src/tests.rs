@@ -159,7 +159,7 @@ fn another_vehicles_lamps_next_to_the_parents_make_the_frame_ambiguous_or_are_ga
     r.render(&[follower, parent, far], 0, Some(1), 4, &mut img);
     let blobs = det.detect(&img, W, W).to_vec();
     assert_eq!(blobs.len(), 8);
-    let got = id.identify(&blobs, &truth_rel, true);
+    let got = id.identify(&blobs, &truth_rel, camera_pose::Prior::Tracking);
     assert_eq!(got.failure, None);
     assert_eq!(got.observation.visible_count(), 4);
     for (k, px) in truth_pixels(&follower, &parent).into_iter().enumerate() {
@@ -176,7 +176,8 @@ fn another_vehicles_lamps_next_to_the_parents_make_the_frame_ambiguous_or_are_ga
     assert_eq!(blobs.len(), 8);
     let halfway = follower.inverse() * pose(8.0, 0.6, 10.0, 0.0);
     assert_eq!(
-        id.identify(&blobs, &halfway, false).failure,
+        id.identify(&blobs, &halfway, camera_pose::Prior::Nominal)
+            .failure,
         Some(NoMatch::Ambiguous)
     );
 
@@ -190,7 +191,8 @@ fn another_vehicles_lamps_next_to_the_parents_make_the_frame_ambiguous_or_are_ga
     );
     let blobs = det.detect(&img, W, W).to_vec();
     assert_eq!(
-        id.identify(&blobs, &truth_rel, true).failure,
+        id.identify(&blobs, &truth_rel, camera_pose::Prior::Tracking)
+            .failure,
         Some(NoMatch::TooFew)
     );
 }
@@ -213,7 +215,7 @@ fn chain_error(
     let mut img = vec![0u8; W * W];
     r.render(&[*follower, *parent], 0, Some(1), seed, &mut img);
     let blobs = det.detect(&img, W, W).to_vec();
-    let got = id.identify(&blobs, prior, false);
+    let got = id.identify(&blobs, prior, camera_pose::Prior::Nominal);
     got.failure.is_none().then_some(())?;
     let e = est.estimate(&got.observation);
     if !e.valid {

@@ -255,6 +255,19 @@ impl ChannelLimits {
         }
     }
 
+    /// A follower's camera frames: camera-pose and the recorder read them;
+    /// small buffers, since every chunk is a whole frame.
+    pub fn image() -> Self {
+        let subs = 2 + SPARE_SUBSCRIBERS;
+        Self {
+            max_publishers: 2,
+            max_subscribers: subs,
+            max_nodes: subs + 2,
+            max_buffer: 2,
+            history: 1,
+        }
+    }
+
     /// The world snapshot: read by every camera and sonar, and the recorder.
     pub fn world(vehicles: usize) -> Self {
         let subs = 2 * vehicles + 1 + SPARE_SUBSCRIBERS;

@@ -433,6 +433,8 @@ macro_rules! section_match {
             "follower" => $($borrow)+ $s.follower,
             "mpc" => $($borrow)+ $s.mpc,
             "acoustic" => $($borrow)+ $s.acoustic,
+            "optics" => $($borrow)+ $s.optics,
+            "detect" => $($borrow)+ $s.detect,
             other => return Err(invalid(other, "no such section")),
         })
     };
@@ -502,6 +504,12 @@ pub struct Scenario {
     /// Acoustic modem of the baseline (`camera-pose`'s `AcousticConfig`).
     #[serde(default)]
     pub acoustic: toml::Table,
+    /// Water and sensor optics of the rendered camera image (`camera_sim::OpticsConfig`).
+    #[serde(default)]
+    pub optics: toml::Table,
+    /// Beacon detection and identification in the image (`camera_pose::DetectConfig`).
+    #[serde(default)]
+    pub detect: toml::Table,
     /// What happens when a process dies (`[supervision]`).
     #[serde(default)]
     pub supervision: faults::Supervision,
@@ -520,6 +528,8 @@ pub enum ProcessKind {
     World,
     /// Follower camera: beacon pixels and the parent's pose.
     CameraPose,
+    /// Follower camera's image, rendered from the world (`[camera] model = "image"`).
+    CameraSim,
     /// Rangefinders.
     Sonar,
     /// Leader guidance or follower formation shift.
@@ -532,10 +542,11 @@ pub enum ProcessKind {
 
 impl ProcessKind {
     /// Every kind.
-    pub const ALL: [ProcessKind; 7] = [
+    pub const ALL: [ProcessKind; 8] = [
         ProcessKind::SimPlant,
         ProcessKind::World,
         ProcessKind::CameraPose,
+        ProcessKind::CameraSim,
         ProcessKind::Sonar,
         ProcessKind::Planner,
         ProcessKind::Mpc,
@@ -548,6 +559,7 @@ impl ProcessKind {
             ProcessKind::SimPlant => "sim-plant",
             ProcessKind::World => "world",
             ProcessKind::CameraPose => "camera-pose",
+            ProcessKind::CameraSim => "camera-sim",
             ProcessKind::Sonar => "sonar",
             ProcessKind::Planner => "planner",
             ProcessKind::Mpc => "mpc",
@@ -561,6 +573,7 @@ impl ProcessKind {
             ProcessKind::SimPlant => "shoal-sim-plant",
             ProcessKind::World => "shoal-world",
             ProcessKind::CameraPose => "shoal-camera-pose",
+            ProcessKind::CameraSim => "shoal-camera-sim",
             ProcessKind::Sonar => "shoal-sonar",
             ProcessKind::Planner => "shoal-planner",
             ProcessKind::Mpc => "shoal-mpc",
@@ -574,14 +587,45 @@ impl ProcessKind {
     }
 
     /// Pipeline stage within one lockstep frame: plant → world → sensors →
-    /// planner → mpc → (plant). The recorder drains with the plant.
-    pub const fn stage(self) -> u64 {
+    /// planner → mpc → (plant). The recorder drains with the plant. With
+    /// camera images, the camera's renderer takes the sensors' stage and
+    /// camera-pose, planner and mpc each move one stage later (six stages).
+    pub const fn stage(self, model: CameraModel) -> u64 {
+        let late = match model {
+            CameraModel::Point => 0,
+            CameraModel::Image => 1,
+        };
         match self {
             ProcessKind::SimPlant | ProcessKind::Recorder => 0,
             ProcessKind::World => 1,
-            ProcessKind::CameraPose | ProcessKind::Sonar => 2,
-            ProcessKind::Planner => 3,
-            ProcessKind::Mpc => 4,
+            ProcessKind::Sonar | ProcessKind::CameraSim => 2,
+            ProcessKind::CameraPose => 2 + late,
+            ProcessKind::Planner => 3 + late,
+            ProcessKind::Mpc => 4 + late,
+        }
+    }
+}
+
+/// What the follower's camera gives camera-pose (`[camera] model`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CameraModel {
+    /// The beacons' pixels projected from ground truth with Gaussian noise
+    /// and a visibility cut-off, identities attached (camera-pose simulates
+    /// them itself from the world).
+    #[default]
+    Point,
+    /// A rendered 8-bit image of turbid water (the camera-sim process);
+    /// camera-pose finds and identifies the beacons in it.
+    Image,
+}
+
+impl CameraModel {
+    /// Stages of one lockstep frame (see [`ProcessKind::stage`]).
+    pub const fn stages(self) -> u64 {
+        match self {
+            CameraModel::Point => 5,
+            CameraModel::Image => 6,
         }
     }
 }
@@ -743,6 +787,36 @@ impl Scenario {
                         "{} Hz is not a whole number of {} s ticks (period/tick = {ticks:.4})",
                         short(hz),
                         r.tick_s
+                    ),
+                ));
+            }
+        }
+        let model = self.camera_model();
+        if let Some(m) = self.camera.get("model") {
+            if !matches!(m.as_str(), Some("point" | "image")) {
+                return Err(invalid(
+                    "camera.model",
+                    format!("must be \"point\" or \"image\", got {m}"),
+                ));
+            }
+        }
+        for (key, hz) in [
+            ("rates.camera_hz", r.camera_hz),
+            ("rates.planner_hz", r.planner_hz),
+            ("rates.mpc_hz", r.mpc_hz),
+        ] {
+            let ticks = self.divisor(hz);
+            if ticks < model.stages() && ticks > 1 {
+                return Err(invalid(
+                    key,
+                    format!(
+                        "{} Hz is {ticks} ticks of {} s, but a frame needs {} stages with camera {} \
+                         (one tick each): make [rates] tick_s at most {}",
+                        short(hz),
+                        r.tick_s,
+                        model.stages(),
+                        if model == CameraModel::Image { "images" } else { "points" },
+                        short(1.0 / (hz * model.stages() as f64)),
                     ),
                 ));
             }
@@ -1005,7 +1079,7 @@ impl Scenario {
         match kind {
             ProcessKind::SimPlant => r.plant_hz,
             ProcessKind::World => r.world_hz,
-            ProcessKind::CameraPose => r.camera_hz,
+            ProcessKind::CameraPose | ProcessKind::CameraSim => r.camera_hz,
             ProcessKind::Sonar => r.sonar_hz,
             ProcessKind::Planner => r.planner_hz,
             ProcessKind::Mpc => r.mpc_hz,
@@ -1068,9 +1142,20 @@ impl Scenario {
         reach
     }
 
+    /// The camera model, `[camera] model` (the point model when absent or
+    /// not a known name; `validate` refuses the latter).
+    pub fn camera_model(&self) -> CameraModel {
+        match self.camera.get("model").and_then(|v| v.as_str()) {
+            Some("image") => CameraModel::Image,
+            _ => CameraModel::Point,
+        }
+    }
+
     /// Every process of the run in a fixed order: world, recorder, then per
-    /// vehicle sim-plant, camera-pose (followers only), sonar, planner, mpc.
+    /// vehicle sim-plant, camera-sim (followers, with camera images),
+    /// camera-pose (followers only), sonar, planner, mpc.
     pub fn processes(&self) -> Vec<ProcessSpec> {
+        let model = self.camera_model();
         let mut out = Vec::new();
         let push = |kind: ProcessKind, vehicle: &str, out: &mut Vec<ProcessSpec>| {
             let divisor = if kind == ProcessKind::Recorder {
@@ -1085,7 +1170,7 @@ impl Scenario {
                 kind,
                 vehicle: vehicle.to_string(),
                 divisor,
-                phase: kind.stage() % divisor,
+                phase: kind.stage(model) % divisor,
             });
         };
         push(ProcessKind::World, RUN_VEHICLE, &mut out);
@@ -1093,6 +1178,9 @@ impl Scenario {
         for v in &self.vehicles {
             push(ProcessKind::SimPlant, &v.name, &mut out);
             if v.parent.is_some() {
+                if model == CameraModel::Image {
+                    push(ProcessKind::CameraSim, &v.name, &mut out);
+                }
                 push(ProcessKind::CameraPose, &v.name, &mut out);
             }
             push(ProcessKind::Sonar, &v.name, &mut out);

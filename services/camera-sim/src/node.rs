@@ -1,0 +1,116 @@
+//! Wiring of the renderer to its channels: the run's `world` in, this
+//! follower's `image` out, rendered in place into the loaned sample.
+//!
+//! This is a sensor simulator: it reads ground truth (every vehicle's pose
+//! in the world snapshot), as the sonar does. What it publishes is only the
+//! frame; camera-pose reads nothing else.
+
+use anyhow::Context;
+use camera_pose::{BeaconLayout, CameraConfig, HullConfig};
+use camera_sim::{OpticsConfig, Renderer};
+use ipc_types::{Image, RunChannel, World};
+use nalgebra::Isometry3;
+use shoal_runtime::convert::{seed_for, world_pose};
+use shoal_runtime::ports::Origin;
+use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use shoal_scenario::Scenario;
+
+pub struct CameraSimTask {
+    renderer: Renderer,
+    index: usize,
+    parent: usize,
+    seed: u64,
+    frame: u32,
+    world_in: Subscriber<World>,
+    image_out: Publisher<Image>,
+    world: Option<World>,
+    poses: Vec<Isometry3<f64>>,
+}
+
+impl CameraSimTask {
+    pub fn new(rt: &Runtime, scenario: &Scenario) -> anyhow::Result<Self> {
+        let me = &rt.args().vehicle;
+        let index = scenario
+            .vehicle_index(me)
+            .context("vehicle not in scenario")?;
+        let parent_name = scenario.vehicles[index]
+            .parent
+            .as_ref()
+            .context("camera-sim runs on followers only")?;
+        let parent = scenario
+            .vehicle_index(parent_name)
+            .context("parent not in scenario")?;
+        let camera: CameraConfig = scenario.section("camera")?;
+        let layout: BeaconLayout = scenario.section("beacons")?;
+        let hull: HullConfig = scenario.section("hull")?;
+        let optics: OpticsConfig = scenario.section("optics")?;
+        let renderer = Renderer::new(&camera, &layout, &hull, &optics)?;
+        tracing::info!(
+            attenuation_per_m = renderer.attenuation_per_m(),
+            visibility_range_m = camera.visibility_range_m,
+            "water optics"
+        );
+        let run = &rt.args().run_id;
+        Ok(Self {
+            renderer,
+            index,
+            parent,
+            seed: seed_for(scenario.seed, index, 4),
+            frame: 0,
+            world_in: rt.subscriber(
+                &ipc_types::run_service_name(run, RunChannel::World),
+                &ChannelLimits::world(scenario.vehicles.len()),
+                2,
+            )?,
+            image_out: rt.publisher(
+                &ipc_types::image_service_name(run, me),
+                &ChannelLimits::image(),
+            )?,
+            world: None,
+            poses: Vec::with_capacity(scenario.vehicles.len()),
+        })
+    }
+}
+
+impl Task for CameraSimTask {
+    fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        if let Some(w) = self.world_in.latest(ctx)? {
+            self.world = Some(w);
+        }
+        let Some(w) = &self.world else {
+            return Ok(());
+        };
+        self.poses.clear();
+        self.poses
+            .extend(w.vehicles[..w.count as usize].iter().map(world_pose));
+        let origin = Origin::of(&w.header);
+        let (width, height) = (self.renderer.width(), self.renderer.height());
+        let seed = seed_for(self.seed, self.frame as usize, 0);
+        let frame = self.frame;
+        let (renderer, poses, own, parent) =
+            (&mut self.renderer, &self.poses, self.index, self.parent);
+        let mut stats = camera_sim::FrameStats::default();
+        self.image_out.publish_in_place(ctx, origin, |img| {
+            img.width_px = width as u32;
+            img.height_px = height as u32;
+            img.step_bytes = width as u32;
+            img.frame = frame;
+            stats = renderer.render(
+                poses,
+                own,
+                Some(parent),
+                seed,
+                &mut img.data[..width * height],
+            );
+        })?;
+        tracing::trace!(
+            frame,
+            lamps = stats.lamps,
+            parent_lamps = stats.target_lamps,
+            saturated = stats.saturated,
+            "frame"
+        );
+        self.frame = self.frame.wrapping_add(1);
+        Ok(())
+    }
+}
