@@ -20,6 +20,7 @@
 //! ```
 
 mod diff;
+pub mod image;
 mod reader;
 mod recover;
 mod registry;

@@ -147,15 +147,47 @@ impl RecordingWriter {
                 id
             }
         };
+        self.add_channel_with_schema(topic, schema_id, info.schema_name, info.type_name, qos)
+    }
+
+    /// Adds a follower's camera frames as `sensor_msgs/msg/Image` (see
+    /// [`crate::image`]); write them with [`Self::write_raw`], the body from
+    /// [`crate::image::encode`]. `depth` is the subscriber's queue.
+    pub fn add_image_channel(&mut self, topic: &str, depth: usize) -> Result<u16, WriterError> {
+        let name = crate::image::SCHEMA_NAME;
+        let schema_id = match self.schemas.get(name) {
+            Some(id) => *id,
+            None => {
+                let id = self.writer.add_schema(
+                    name,
+                    "ros2msg",
+                    crate::image::SCHEMA_TEXT.as_bytes(),
+                )?;
+                self.schemas.insert(name, id);
+                id
+            }
+        };
+        let qos = rosbag2::offered_qos_profiles(depth);
+        self.add_channel_with_schema(topic, schema_id, name, ipc_types::Image::TYPE_NAME, qos)
+    }
+
+    fn add_channel_with_schema(
+        &mut self,
+        topic: &str,
+        schema_id: u16,
+        schema_name: &str,
+        type_name: &str,
+        qos: String,
+    ) -> Result<u16, WriterError> {
         let mut meta = BTreeMap::new();
-        meta.insert("shoal.type_name".to_string(), info.type_name.to_string());
+        meta.insert("shoal.type_name".to_string(), type_name.to_string());
         meta.insert(rosbag2::OFFERED_QOS_PROFILES.to_string(), qos.clone());
         let id = self.writer.add_channel(schema_id, topic, "cdr", &meta)?;
         self.topics.insert(
             id,
             rosbag2::Topic {
                 name: topic.to_string(),
-                type_name: info.schema_name.to_string(),
+                type_name: schema_name.to_string(),
                 qos,
                 messages: 0,
             },

@@ -20,10 +20,19 @@ pub(super) fn export_foxglove<W: std::io::Write + std::io::Seek>(
         .iter()
         .filter_map(|c| parse_topic(&c.topic).map(|(v, ch)| (c.id, (v.to_string(), ch))))
         .collect();
+    // Camera frames go across unchanged, on their own topic.
+    let images: HashMap<u16, String> = rec
+        .channels()
+        .iter()
+        .filter(|c| c.schema_name == recordings::image::SCHEMA_NAME)
+        .map(|c| (c.id, c.topic.clone()))
+        .collect();
     // Time order; at equal times truth first, so everything at t sees truth at t.
     let msgs = rec.messages();
     let mut order: Vec<usize> = (0..msgs.len())
-        .filter(|i| routes.contains_key(&msgs[*i].channel))
+        .filter(|i| {
+            routes.contains_key(&msgs[*i].channel) || images.contains_key(&msgs[*i].channel)
+        })
         .collect();
     order.sort_by_key(|i| {
         let m = &msgs[*i];
@@ -48,6 +57,10 @@ pub(super) fn export_foxglove<W: std::io::Write + std::io::Seek>(
             bar.set_position(n as u64);
         }
         let m = &msgs[*i];
+        if let Some(topic) = images.get(&m.channel) {
+            conv.out.write_image(topic, m.log_time, &m.data)?;
+            continue;
+        }
         let Some((vehicle, channel)) = routes.get(&m.channel) else {
             continue;
         };

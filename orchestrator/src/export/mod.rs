@@ -270,6 +270,46 @@ impl<W: std::io::Write + std::io::Seek> FoxgloveWriter<W> {
         Ok(())
     }
 
+    /// Copies a recorded camera frame (`sensor_msgs/msg/Image`, CDR, as
+    /// stored) onto `topic`: Foxglove's Image panel shows it as it is.
+    fn write_image(&mut self, topic: &str, log_time_ns: u64, data: &[u8]) -> anyhow::Result<()> {
+        const NAME: &str = recordings::image::SCHEMA_NAME;
+        let idx = match self.topics.get(topic) {
+            Some(i) => *i,
+            None => {
+                let schema = match self.schemas.get(NAME) {
+                    Some(id) => *id,
+                    None => {
+                        let id = self.writer.add_schema(
+                            NAME,
+                            "ros2msg",
+                            recordings::image::SCHEMA_TEXT.as_bytes(),
+                        )?;
+                        self.schemas.insert(NAME, id);
+                        id
+                    }
+                };
+                let id = self
+                    .writer
+                    .add_channel(schema, topic, "cdr", &BTreeMap::new())?;
+                self.channels.push((id, topic.to_string(), NAME, 0));
+                self.topics
+                    .insert(topic.to_string(), self.channels.len() - 1);
+                self.channels.len() - 1
+            }
+        };
+        let (id, _, _, count) = &mut self.channels[idx];
+        let header = mcap::records::MessageHeader {
+            channel_id: *id,
+            sequence: *count as u32,
+            log_time: log_time_ns.saturating_add(self.epoch_ns),
+            publish_time: log_time_ns.saturating_add(self.epoch_ns),
+        };
+        self.writer.write_to_known_channel(&header, data)?;
+        *count += 1;
+        Ok(())
+    }
+
     fn finish(mut self, notes: Vec<String>) -> anyhow::Result<ExportReport> {
         self.writer.finish()?;
         Ok(ExportReport {

@@ -72,12 +72,39 @@ impl<T: Sample> AnyPublisher for Typed<T> {
     }
 }
 
+/// A follower's recorded camera frames (`sensor_msgs/msg/Image`), put back
+/// into image samples in place.
+struct ImagePublisher {
+    publisher: Publisher<ipc_types::Image>,
+    sent: u64,
+}
+
+impl AnyPublisher for ImagePublisher {
+    fn publish_raw(&mut self, data: &[u8]) -> anyhow::Result<()> {
+        let seq = self.sent;
+        let mut ok = true;
+        // Header included: the frame's recorded time, a gap-free sequence.
+        self.publisher
+            .publish_stamped_in_place(|img| ok = recordings::image::to_sample(data, seq, img))?;
+        anyhow::ensure!(
+            ok,
+            "a recorded camera frame that is not a mono8 image that fits"
+        );
+        self.sent += 1;
+        Ok(())
+    }
+    fn subscribers(&self) -> usize {
+        self.publisher.subscribers()
+    }
+}
+
 /// The service limits every opener of `topic` uses.
 fn limits_of(topic: &str, vehicles: usize, processes: usize) -> ChannelLimits {
     match topic {
         "/world" => ChannelLimits::world(vehicles),
         "/stats" => shoal_runtime::stats::stats_limits(processes),
         "/events" => ChannelLimits::events(),
+        t if t.ends_with("/image") => ChannelLimits::image(),
         _ => ChannelLimits::vehicle(),
     }
 }
@@ -101,6 +128,12 @@ fn open_publisher(
         Ok(Box::new(Typed::<T> {
             publisher: shoal_runtime::node_publisher::<T, _>(node, service, limits)?,
         }))
+    }
+    if schema == recordings::image::SCHEMA_NAME {
+        return Ok(Box::new(ImagePublisher {
+            publisher: shoal_runtime::node_publisher::<ipc_types::Image, _>(node, service, limits)?,
+            sent: 0,
+        }));
     }
     ipc_types::with_sample_type!(schema, T => typed::<T>(node, service, limits), else bail!("no sample type for schema {schema}"))
 }

@@ -74,6 +74,60 @@ impl<T: Sample> Tap for TypedTap<T> {
     }
 }
 
+/// A follower's camera frames: read in place, every `every`-th frame
+/// written as a `sensor_msgs/msg/Image` (the rest are skipped by design,
+/// not lost).
+struct ImageTap {
+    sub: Subscriber<ipc_types::Image>,
+    channel: u16,
+    every: u32,
+    frame_id: String,
+}
+
+impl Tap for ImageTap {
+    fn drain(
+        &mut self,
+        ctx: Option<&StepContext>,
+        order: usize,
+        arena: &mut Vec<u8>,
+        out: &mut Vec<Pending>,
+    ) -> Result<(), RuntimeError> {
+        let any_time = StepContext {
+            sim_time_ns: u64::MAX,
+            tick: 0,
+            wake_mono_ns: 0,
+            since_last_ns: 0,
+            last: false,
+            mode: shoal_runtime::Mode::Realtime,
+        };
+        let (every, frame_id) = (self.every, &self.frame_id);
+        self.sub
+            .take_ready_in_place(ctx.unwrap_or(&any_time), |img| {
+                if img.frame % every != 0 {
+                    return;
+                }
+                let start = arena.len();
+                recordings::image::encode(img, frame_id, arena);
+                out.push(Pending {
+                    sim_time_ns: img.header.sim_time_ns,
+                    order,
+                    seq: img.header.seq,
+                    start,
+                    len: arena.len() - start,
+                });
+            })
+    }
+    fn channel(&self) -> u16 {
+        self.channel
+    }
+    fn lost(&self) -> u64 {
+        self.sub.lost()
+    }
+    fn rejected(&self) -> u64 {
+        self.sub.rejected()
+    }
+}
+
 /// Simulated time between chunk flushes, ns.
 pub const FLUSH_PERIOD_SIM_NS: u64 = 1_000_000_000;
 
@@ -194,6 +248,28 @@ impl RecorderTask {
                     b,
                 )?);
                 taps.push(tap);
+            }
+        }
+        if scenario.camera_model() == shoal_scenario::CameraModel::Image {
+            let camera: camera_pose::CameraConfig = scenario.section("camera")?;
+            let every = (scenario.rates.camera_hz / camera.record_hz)
+                .round()
+                .max(1.0) as u32;
+            for v in scenario.vehicles.iter().filter(|v| v.parent.is_some()) {
+                let limits = ChannelLimits::image();
+                let sub = rt.subscriber::<ipc_types::Image>(
+                    &ipc_types::image_service_name(&run, &v.name),
+                    &limits,
+                    limits.max_buffer,
+                )?;
+                let channel = writer
+                    .add_image_channel(&ipc_types::image_topic(&v.name), limits.max_buffer)?;
+                taps.push(Box::new(ImageTap {
+                    sub,
+                    channel,
+                    every,
+                    frame_id: recordings::image::frame_id(&v.name),
+                }));
             }
         }
         Ok(Self {

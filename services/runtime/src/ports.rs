@@ -292,6 +292,26 @@ impl<T: Sample, S: Service> Publisher<T, S> {
         Ok(())
     }
 
+    /// Sends a sample whose header `fill` writes itself (replay of a
+    /// large sample), in place like [`Publisher::publish_in_place`].
+    pub fn publish_stamped_in_place(
+        &mut self,
+        fill: impl FnOnce(&mut T),
+    ) -> Result<(), RuntimeError> {
+        let loan = self
+            .inner
+            .loan_uninit()
+            .map_err(|e| self.send_error(iceoryx2::port::SendError::from(e)))?;
+        #[allow(unsafe_code)]
+        // SAFETY: as in `publish_in_place`: `T: Pod` and the chunk's bytes
+        // are initialised shared memory.
+        let mut out = unsafe { loan.assume_init() };
+        fill(out.payload_mut());
+        out.send().map_err(|e| self.send_error(e))?;
+        self.seq += 1;
+        Ok(())
+    }
+
     fn send_error(&self, e: iceoryx2::port::SendError) -> RuntimeError {
         RuntimeError::Io {
             service: self.service.clone(),
@@ -549,6 +569,49 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
         self.held_in_place.drain(..ready - 1);
         let newest = self.held_in_place.pop_front();
         Ok(newest.map(|s| f(s.payload())))
+    }
+
+    /// Calls `f` on every ready sample in place, oldest first (the
+    /// recorder's path for camera frames: each is read once, where it lies,
+    /// and released). A sample that is not ready stays borrowed; at most
+    /// two are, and the rest wait in the subscriber's queue.
+    pub fn take_ready_in_place(
+        &mut self,
+        ctx: &StepContext,
+        mut f: impl FnMut(&T),
+    ) -> Result<(), RuntimeError> {
+        while self
+            .held_in_place
+            .front()
+            .is_some_and(|s| self.ready(ctx, s.payload()))
+        {
+            if let Some(s) = self.held_in_place.pop_front() {
+                f(s.payload());
+            }
+        }
+        while self.held_in_place.len() < BORROWED_SAMPLES {
+            let received = self.inner.receive().map_err(|e| RuntimeError::Io {
+                service: self.service.clone(),
+                source: Box::new(e),
+            })?;
+            let Some(sample) = received else {
+                break;
+            };
+            let taken = mono_ns();
+            let publisher = sample.header().publisher_id().value();
+            let h = *sample.payload().header();
+            let finite = sample.payload().is_finite();
+            self.account(publisher, &h, taken, finite);
+            if !finite {
+                continue;
+            }
+            if self.held_in_place.is_empty() && self.ready(ctx, sample.payload()) {
+                f(sample.payload());
+            } else {
+                self.held_in_place.push_back(sample);
+            }
+        }
+        Ok(())
     }
 
     /// Books one received sample: latency, sequence gaps, rejection.
