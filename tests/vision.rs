@@ -4,6 +4,8 @@
 //! here wrote) agrees with camera-pose's centroids and poses on the recorded
 //! frames, and a re-run of camera-pose against them reproduces its outputs.
 
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
 use shoal_tests::*;
 
 /// A 12 s image run of the small formation recording every frame.

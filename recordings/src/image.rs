@@ -37,7 +37,7 @@ pub fn frame_id(vehicle: &str) -> String {
 }
 
 fn align(out: &mut Vec<u8>, base: usize, to: usize) {
-    while (out.len() - base) % to != 0 {
+    while !(out.len() - base).is_multiple_of(to) {
         out.push(0);
     }
 }
