@@ -1,6 +1,6 @@
-//! Sample types of `shoal bench ipc`: ping-pong samples of 256 B and 4 KiB
-//! (common [`Header`] included) that travel through shoal's real ports, and
-//! the names of the benchmark's services.
+//! Sample types of `shoal bench ipc`: ping-pong samples of 256 B, 4 KiB,
+//! 256 KiB and 1 MiB (common [`Header`] included) that travel through
+//! shoal's real ports, and the names of the benchmark's services.
 //!
 //! The payload is `f64`s, like every real shoal sample, so the publisher's
 //! and subscriber's finite-value checks do the work they do on real channels.
@@ -36,6 +36,32 @@ sample! {
         pub round: u64,
         /// Payload filled by the pinger and echoed unchanged by the ponger.
         pub payload: [f64; 506],
+    }
+}
+
+sample! {
+    /// A 256 KiB ping-pong sample of `shoal bench ipc` (a camera frame's
+    /// size), sent and read in place. Its payload is integers: the finite
+    /// check costs nothing, as on an image.
+    pub struct BenchPing256K("shoal_msgs/msg/BenchPing256K", "shoal.BenchPing256K.v1", size = 256 * 1024) {
+        /// Common header.
+        pub header: Header,
+        /// Round trip this sample belongs to (the pong echoes the ping's).
+        pub round: u64,
+        /// Payload: eight words spread over it are written and checked.
+        pub payload: [u64; (256 * 1024 - 48) / 8],
+    }
+}
+
+sample! {
+    /// A 1 MiB ping-pong sample of `shoal bench ipc`, sent and read in place.
+    pub struct BenchPing1M("shoal_msgs/msg/BenchPing1M", "shoal.BenchPing1M.v1", size = 1024 * 1024) {
+        /// Common header.
+        pub header: Header,
+        /// Round trip this sample belongs to (the pong echoes the ping's).
+        pub round: u64,
+        /// Payload: eight words spread over it are written and checked.
+        pub payload: [u64; (1024 * 1024 - 48) / 8],
     }
 }
 

@@ -4,7 +4,6 @@
 use std::io::Write as _;
 use std::time::{Duration, Instant};
 
-use crate::payload::Payload;
 use crate::{involuntary_switches, BenchError, PeerConfig, PeerReport, PongReport};
 
 /// Round number of the stop sample (echoed, then the ponger exits).
@@ -42,23 +41,25 @@ impl Served {
     }
 }
 
-/// Runs the pinger side.
+/// Runs the pinger side for messages of `size` bytes.
 ///
-/// `send` sends one message. `wait(round, limit)` returns the reply of
-/// `round`, dropping replies of other rounds (late handshake echoes);
-/// with `Some(limit)` it may give up after about that long and return
-/// `None`, with `None` it waits as its case waits (polls give up after the
-/// peer timeout, blocking waits block).
-pub(crate) fn run_pinger<M: Payload>(
+/// `send(round)` writes the message of `round` (in place where the
+/// transport allows) and sends it. `wait(round, limit)` returns whether the
+/// reply of `round` carried the right payload, dropping replies of other
+/// rounds (late handshake echoes); with `Some(limit)` it may give up after
+/// about that long and return `None`, with `None` it waits as its case
+/// waits (polls give up after the peer timeout, blocking waits block).
+pub(crate) fn run_pinger(
     cfg: &PeerConfig,
-    mut send: impl FnMut(&M) -> Result<(), BenchError>,
-    mut wait: impl FnMut(u64, Option<Duration>) -> Result<Option<M>, BenchError>,
+    size: usize,
+    mut send: impl FnMut(u64) -> Result<(), BenchError>,
+    mut wait: impl FnMut(u64, Option<Duration>) -> Result<Option<bool>, BenchError>,
 ) -> Result<PeerReport, BenchError> {
     let timeout = cfg.timeout();
     let start = Instant::now();
     // Handshake: resend round 0 until the ponger, whenever it starts, echoes it.
     loop {
-        send(&M::make(0))?;
+        send(0)?;
         if wait(0, Some(HANDSHAKE_TRY))?.is_some() {
             break;
         }
@@ -77,18 +78,17 @@ pub(crate) fn run_pinger<M: Payload>(
         if round == cfg.warmup + 1 {
             switches_before = involuntary_switches();
         }
-        let msg = M::make(round);
         let t0 = Instant::now();
-        send(&msg)?;
+        send(round)?;
         let reply = wait(round, None)?;
         let rtt = t0.elapsed();
-        let Some(reply) = reply else {
+        let Some(intact) = reply else {
             return Err(BenchError::Timeout {
                 what: "a reply",
                 secs: timeout.as_secs_f64(),
             });
         };
-        if !reply.same_payload(&msg) {
+        if !intact {
             return Err(BenchError::Corrupt { round });
         }
         verified += 1;
@@ -99,7 +99,7 @@ pub(crate) fn run_pinger<M: Payload>(
     let preempted = switches_before
         .zip(involuntary_switches())
         .map(|(a, b)| b.saturating_sub(a));
-    send(&M::make(STOP))?;
+    send(STOP)?;
     if wait(STOP, Some(timeout))?.is_none() {
         return Err(BenchError::Timeout {
             what: "the ponger acknowledging the stop",
@@ -109,7 +109,7 @@ pub(crate) fn run_pinger<M: Payload>(
     if let Some(path) = &cfg.samples {
         write_samples(path, &rtts)?;
     }
-    Ok(report(cfg, M::SIZE, verified, &rtts, preempted))
+    Ok(report(cfg, size, verified, &rtts, preempted))
 }
 
 /// Runs the ponger side: `serve` waits (as its case waits) and echoes what
@@ -193,7 +193,7 @@ mod tests {
     use clap::Parser;
 
     use super::*;
-    use crate::payload::Raw256;
+    use crate::payload::{Payload, Raw256};
 
     fn cfg() -> PeerConfig {
         PeerConfig::parse_from([
@@ -213,11 +213,12 @@ mod tests {
     /// payload of round `bad` (if any).
     fn loopback(bad: Option<u64>) -> Result<PeerReport, BenchError> {
         let queue = std::cell::RefCell::new(VecDeque::new());
-        run_pinger::<Raw256>(
+        run_pinger(
             &cfg(),
-            |m| {
-                let mut echo = *m;
-                if Some(m.round) == bad {
+            Raw256::SIZE,
+            |round| {
+                let mut echo = Raw256::make(round);
+                if Some(round) == bad {
                     echo.words[30] ^= 1;
                 }
                 queue.borrow_mut().push_back(echo);
@@ -226,7 +227,7 @@ mod tests {
             |round, _| {
                 while let Some(m) = queue.borrow_mut().pop_front() {
                     if m.round == round {
-                        return Ok(Some(m));
+                        return Ok(Some(m.check(round)));
                     }
                 }
                 Ok(None)

@@ -51,10 +51,12 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 pub use costs::CostReport;
-pub use payload::{Payload, Raw256, Raw4K};
+pub use payload::{Payload, Raw1M, Raw256, Raw256K, Raw4K};
 
-/// The sample sizes the benchmark knows, bytes (the shoal samples include the common header).
-pub const SIZES: [usize; 2] = [256, 4096];
+/// The sample sizes the benchmark knows, bytes (the shoal samples include
+/// the common header): two a service sends by value, and a camera frame's
+/// 256 KiB and 1 MiB, which travel in place.
+pub const SIZES: [usize; 4] = [256, 4096, 256 * 1024, 1024 * 1024];
 
 /// One benchmark case: a transport and a way of waiting.
 #[derive(
@@ -169,7 +171,7 @@ pub struct PeerConfig {
     /// Transport and wait mode (ignored by `costs`).
     #[arg(long, value_enum, default_value = "iox2-poll")]
     pub case: Case,
-    /// Sample size in bytes: 256 or 4096.
+    /// Sample size in bytes: 256, 4096, 262144 or 1048576.
     #[arg(long, default_value_t = 256)]
     pub size: usize,
     /// Timed round trips.
@@ -295,7 +297,7 @@ pub enum BenchError {
     #[error("interrupted by a termination request")]
     Interrupted,
     /// No sample type of that size exists.
-    #[error("unsupported sample size {0} B (256 or 4096)")]
+    #[error("unsupported sample size {0} B (256, 4096, 262144 or 1048576)")]
     UnsupportedSize(usize),
     /// The samples file could not be written.
     #[error("cannot write {path}: {source}")]
@@ -348,14 +350,28 @@ pub fn run_peer(cfg: &PeerConfig) -> Result<PeerOutput, BenchError> {
                 (Case::IoxPoll | Case::IoxEvent | Case::IoxWaitset, 4096) => {
                     raw::ping::<Raw4K>(cfg)
                 }
+                (Case::IoxPoll | Case::IoxEvent | Case::IoxWaitset, 262_144) => {
+                    raw::ping::<Raw256K>(cfg)
+                }
+                (Case::IoxPoll | Case::IoxEvent | Case::IoxWaitset, 1_048_576) => {
+                    raw::ping::<Raw1M>(cfg)
+                }
                 (Case::ShoalPoll | Case::ShoalEvent, 256) => {
                     shoal::ping::<ipc_types::bench::BenchPing256>(cfg)
                 }
                 (Case::ShoalPoll | Case::ShoalEvent, 4096) => {
                     shoal::ping::<ipc_types::bench::BenchPing4K>(cfg)
                 }
+                (Case::ShoalPoll | Case::ShoalEvent, 262_144) => {
+                    shoal::ping::<ipc_types::bench::BenchPing256K>(cfg)
+                }
+                (Case::ShoalPoll | Case::ShoalEvent, 1_048_576) => {
+                    shoal::ping::<ipc_types::bench::BenchPing1M>(cfg)
+                }
                 (Case::Uds, 256) => uds::ping::<Raw256>(cfg),
                 (Case::Uds, 4096) => uds::ping::<Raw4K>(cfg),
+                (Case::Uds, 262_144) => uds::ping::<Raw256K>(cfg),
+                (Case::Uds, 1_048_576) => uds::ping::<Raw1M>(cfg),
                 (_, s) => Err(BenchError::UnsupportedSize(s)),
             }?;
             Ok(PeerOutput::Ping(report))
@@ -368,14 +384,28 @@ pub fn run_peer(cfg: &PeerConfig) -> Result<PeerOutput, BenchError> {
                 (Case::IoxPoll | Case::IoxEvent | Case::IoxWaitset, 4096) => {
                     raw::pong::<Raw4K>(cfg)
                 }
+                (Case::IoxPoll | Case::IoxEvent | Case::IoxWaitset, 262_144) => {
+                    raw::pong::<Raw256K>(cfg)
+                }
+                (Case::IoxPoll | Case::IoxEvent | Case::IoxWaitset, 1_048_576) => {
+                    raw::pong::<Raw1M>(cfg)
+                }
                 (Case::ShoalPoll | Case::ShoalEvent, 256) => {
                     shoal::pong::<ipc_types::bench::BenchPing256>(cfg)
                 }
                 (Case::ShoalPoll | Case::ShoalEvent, 4096) => {
                     shoal::pong::<ipc_types::bench::BenchPing4K>(cfg)
                 }
+                (Case::ShoalPoll | Case::ShoalEvent, 262_144) => {
+                    shoal::pong::<ipc_types::bench::BenchPing256K>(cfg)
+                }
+                (Case::ShoalPoll | Case::ShoalEvent, 1_048_576) => {
+                    shoal::pong::<ipc_types::bench::BenchPing1M>(cfg)
+                }
                 (Case::Uds, 256) => uds::pong::<Raw256>(cfg),
                 (Case::Uds, 4096) => uds::pong::<Raw4K>(cfg),
+                (Case::Uds, 262_144) => uds::pong::<Raw256K>(cfg),
+                (Case::Uds, 1_048_576) => uds::pong::<Raw1M>(cfg),
                 (_, s) => Err(BenchError::UnsupportedSize(s)),
             }?;
             Ok(PeerOutput::Pong(report))

@@ -33,7 +33,7 @@ struct Ports<S: Sample> {
     events: Option<(Notifier<ipc::Service>, Listener<ipc::Service>)>,
 }
 
-fn open<S: Sample>(cfg: &PeerConfig, ping: bool) -> Result<Ports<S>, BenchError> {
+fn open<S: Sample + Payload>(cfg: &PeerConfig, ping: bool) -> Result<Ports<S>, BenchError> {
     let (me, peer, out_dir, in_dir) = if ping {
         (
             "pinger",
@@ -51,7 +51,12 @@ fn open<S: Sample>(cfg: &PeerConfig, ping: bool) -> Result<Ports<S>, BenchError>
     };
     let vehicle = format!("bench-{}-{}", cfg.case.name(), cfg.size);
     let node = shoal_runtime::domain_node(&cfg.run_id, &format!("{vehicle}/{me}"))?;
-    let limits = ChannelLimits::vehicle();
+    // A per-vehicle channel's limits; a camera frame's for the large sizes.
+    let limits = if in_place::<S>() {
+        ChannelLimits::image()
+    } else {
+        ChannelLimits::vehicle()
+    };
     let case = cfg.case.name();
     let tx = shoal_runtime::node_publisher::<S, _>(
         &node,
@@ -98,23 +103,60 @@ fn context(tick: u64) -> StepContext {
     }
 }
 
-/// Takes every ready sample; returns the one of `round`, if any.
+/// True for the sizes a service moves in place (camera frames); smaller
+/// samples go by value, copied once each way, as every service's do.
+fn in_place<S: Payload>() -> bool {
+    S::SIZE > 4096
+}
+
+/// Publishes the message of `round` with `origin`.
+fn publish<S: Sample + Payload>(
+    tx: &mut Publisher<S>,
+    ctx: &StepContext,
+    origin: Origin,
+    round: u64,
+) -> Result<(), BenchError> {
+    if in_place::<S>() {
+        tx.publish_in_place(ctx, origin, |s| s.fill(round))?;
+    } else {
+        tx.publish(S::make(round), ctx, origin)?;
+    }
+    Ok(())
+}
+
+/// Calls `f` on every ready sample: in place for the large sizes, on a
+/// copy for the small ones.
+fn take<S: Sample + Payload>(
+    rx: &mut Subscriber<S>,
+    ctx: &StepContext,
+    mut f: impl FnMut(&S),
+) -> Result<(), BenchError> {
+    if in_place::<S>() {
+        rx.take_ready_in_place(ctx, f)?;
+    } else {
+        rx.take_ready(ctx, |s| f(&s))?;
+    }
+    Ok(())
+}
+
+/// Takes every ready sample; returns whether the one of `round`, if any,
+/// is intact.
 fn take_round<S: Sample + Payload>(
     rx: &mut Subscriber<S>,
     ctx: &StepContext,
     round: u64,
-) -> Result<Option<S>, BenchError> {
+) -> Result<Option<bool>, BenchError> {
     let mut found = None;
-    rx.take_ready(ctx, |s| {
+    take(rx, ctx, |s| {
         if s.round() == round {
-            found = Some(s);
+            found = Some(s.check(round));
         }
     })?;
     Ok(found)
 }
 
-/// Echoes every ready sample; the echo keeps the ping's origin, as a
-/// downstream service keeps its input's.
+/// Answers every ready sample after checking it; the reply keeps the
+/// ping's origin, as a downstream service keeps its input's.
 fn echo_all<S: Sample + Payload>(
     rx: &mut Subscriber<S>,
     tx: &mut Publisher<S>,
@@ -122,18 +164,22 @@ fn echo_all<S: Sample + Payload>(
 ) -> Result<Served, BenchError> {
     let mut served = Served::default();
     let mut failure = None;
-    rx.take_ready(ctx, |s| {
+    take(rx, ctx, |s| {
         if failure.is_some() {
             return;
         }
         let round = s.round();
-        match tx.publish(s, ctx, Origin::of(s.header())) {
+        if !s.check(round) {
+            failure = Some(BenchError::Corrupt { round });
+            return;
+        }
+        match publish(tx, ctx, Origin::of(s.header()), round) {
             Ok(()) => served.add(round),
             Err(e) => failure = Some(e),
         }
     })?;
     match failure {
-        Some(e) => Err(e.into()),
+        Some(e) => Err(e),
         None => Ok(served),
     }
 }
@@ -152,10 +198,7 @@ pub(crate) fn ping<S: Sample + Payload>(cfg: &PeerConfig) -> Result<PeerReport, 
     let Ports { tx, rx, events, .. } = &mut ports;
     let timeout = cfg.timeout();
     let ctx = context(0);
-    let mut send = |m: &S| -> Result<(), BenchError> {
-        tx.publish(*m, &ctx, Origin::here(&ctx))?;
-        Ok(())
-    };
+    let mut send = |round: u64| publish(tx, &ctx, Origin::here(&ctx), round);
     match events {
         Some((notifier, listener)) => {
             let waitset = waitset()?;
@@ -165,8 +208,9 @@ pub(crate) fn ping<S: Sample + Payload>(cfg: &PeerConfig) -> Result<PeerReport, 
             let mut tick = 0u64;
             run_pinger(
                 cfg,
-                |m| {
-                    send(m)?;
+                S::SIZE,
+                |round| {
+                    send(round)?;
                     notify(notifier)
                 },
                 |round, limit| loop {
@@ -205,7 +249,7 @@ pub(crate) fn ping<S: Sample + Payload>(cfg: &PeerConfig) -> Result<PeerReport, 
                 },
             )
         }
-        None => run_pinger(cfg, send, |round, limit| {
+        None => run_pinger(cfg, S::SIZE, send, |round, limit| {
             let mut backoff = Backoff::new(limit.unwrap_or(timeout), "a polled reply");
             loop {
                 if let Some(m) = take_round(rx, &ctx, round)? {

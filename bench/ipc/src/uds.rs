@@ -22,15 +22,14 @@ fn io_error(what: &'static str) -> impl Fn(std::io::Error) -> BenchError {
     }
 }
 
-fn read_msg<M: Payload + bytemuck::Pod>(s: &mut UnixStream) -> Result<M, BenchError> {
-    let mut m: M = bytemuck::Zeroable::zeroed();
-    s.read_exact(bytemuck::bytes_of_mut(&mut m))
-        .map_err(io_error("socket read"))?;
-    Ok(m)
+/// Reads one whole message into `m`.
+fn read_msg<M: Payload>(s: &mut UnixStream, m: &mut M) -> Result<(), BenchError> {
+    s.read_exact(bytemuck::bytes_of_mut(m))
+        .map_err(io_error("socket read"))
 }
 
 /// The pinger: connects (retrying until the ponger listens), then pings.
-pub(crate) fn ping<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<PeerReport, BenchError> {
+pub(crate) fn ping<M: Payload>(cfg: &PeerConfig) -> Result<PeerReport, BenchError> {
     let path = socket_path(&cfg.run_id, cfg.size);
     let timeout = cfg.timeout();
     let start = Instant::now();
@@ -51,25 +50,31 @@ pub(crate) fn ping<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<PeerR
         .set_read_timeout(Some(timeout))
         .map_err(io_error("socket setup"))?;
     let mut reader = stream.try_clone().map_err(io_error("socket setup"))?;
+    // One buffer each way, on the heap, reused: the message is written into
+    // it and the socket copies it into the kernel and out again.
+    let mut out: Box<M> = bytemuck::zeroed_box();
+    let mut back: Box<M> = bytemuck::zeroed_box();
     run_pinger(
         cfg,
-        |m: &M| {
+        M::SIZE,
+        |round| {
+            out.fill(round);
             stream
-                .write_all(bytemuck::bytes_of(m))
+                .write_all(bytemuck::bytes_of(&*out))
                 .map_err(io_error("socket write"))
         },
         |round, _limit| loop {
             // The stream is reliable: round 0 is sent once and always answered.
-            let m: M = read_msg(&mut reader)?;
-            if m.round() == round {
-                return Ok(Some(m));
+            read_msg(&mut reader, &mut *back)?;
+            if back.round() == round {
+                return Ok(Some(back.check(round)));
             }
         },
     )
 }
 
 /// The ponger: listens, accepts one connection, echoes until the stop.
-pub(crate) fn pong<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<PongReport, BenchError> {
+pub(crate) fn pong<M: Payload>(cfg: &PeerConfig) -> Result<PongReport, BenchError> {
     let path = socket_path(&cfg.run_id, cfg.size);
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir)
@@ -83,7 +88,7 @@ pub(crate) fn pong<M: Payload + bytemuck::Pod>(cfg: &PeerConfig) -> Result<PongR
     result
 }
 
-fn serve<M: Payload + bytemuck::Pod>(
+fn serve<M: Payload>(
     listener: &UnixListener,
     timeout: Duration,
     warmup: u64,
@@ -113,13 +118,19 @@ fn serve<M: Payload + bytemuck::Pod>(
     stream
         .set_read_timeout(Some(timeout))
         .map_err(io_error("socket setup"))?;
+    let mut buf: Box<M> = bytemuck::zeroed_box();
     run_ponger(warmup, || {
-        let m: M = read_msg(&mut stream)?;
+        read_msg(&mut stream, &mut *buf)?;
+        let round = buf.round();
+        if !buf.check(round) {
+            return Err(BenchError::Corrupt { round });
+        }
+        buf.fill(round);
         stream
-            .write_all(bytemuck::bytes_of(&m))
+            .write_all(bytemuck::bytes_of(&*buf))
             .map_err(io_error("socket write"))?;
         let mut served = Served::default();
-        served.add(m.round());
+        served.add(round);
         Ok(served)
     })
 }

@@ -60,8 +60,10 @@ pub struct IpcCmd {
     /// Untimed round trips before the timed ones, in every pass.
     #[arg(long, default_value_t = 1_000)]
     pub warmup: u64,
-    /// Sample sizes in bytes, comma-separated (256 and/or 4096).
-    #[arg(long, value_delimiter = ',', default_values_t = [256usize, 4096])]
+    /// Sample sizes in bytes, comma-separated: 256, 4096 (sent by value, as
+    /// a service's samples are), 262144 and 1048576 (a camera frame's sizes,
+    /// written and read in place).
+    #[arg(long, value_delimiter = ',', default_values_t = shoal_bench_ipc::SIZES)]
     pub sizes: Vec<usize>,
     /// Cases to run, comma-separated (default: all). iox2-poll / iox2-event /
     /// iox2-waitset: raw iceoryx2 polling / blocking on a Listener / blocking
@@ -405,8 +407,15 @@ pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
     if cmd.cpus.len() != 2 {
         bail!("--cpus takes two CPUs: the pinger's and the ponger's, e.g. 0,1");
     }
-    if let Some(s) = cmd.sizes.iter().find(|s| ![256, 4096].contains(*s)) {
-        bail!("--sizes: {s} B is not a benchmark size (256, 4096)");
+    if let Some(s) = cmd
+        .sizes
+        .iter()
+        .find(|s| !shoal_bench_ipc::SIZES.contains(*s))
+    {
+        bail!(
+            "--sizes: {s} B is not a benchmark size ({})",
+            shoal_bench_ipc::SIZES.map(|s| s.to_string()).join(", ")
+        );
     }
     let cases: Vec<&str> = if cmd.cases.is_empty() {
         CASES.to_vec()
@@ -485,8 +494,10 @@ pub fn run(cmd: IpcCmd) -> anyhow::Result<()> {
     let costs: Vec<Value> = if cmd.no_costs {
         Vec::new()
     } else {
+        // The breakdown is of the by-value path; the in-place sizes have no copy to break down.
         cmd.sizes
             .iter()
+            .filter(|&&s| s <= 4096)
             .map(|&s| bench.costs(s))
             .collect::<anyhow::Result<_>>()?
     };
@@ -619,13 +630,13 @@ fn print_report(
     );
     println!();
     println!(
-        "{:>6}  {:<13} {:<6} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10}",
+        "{:>8}  {:<13} {:<6} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10}",
         "size", "case", "wait", "p50", "p99", "p99.9", "max", "mean", "preempted"
     );
     for s in stats {
         println!(
-            "{:>6}  {:<13} {:<6} {:>9.2} {:>9.2} {:>9.2} {:>9.1} {:>9.2} {:>10}",
-            format!("{} B", s.size),
+            "{:>8}  {:<13} {:<6} {:>9.2} {:>9.2} {:>9.2} {:>9.1} {:>9.2} {:>10}",
+            size_label(s.size),
             s.case,
             wait_of(&s.case),
             s.p50,
@@ -639,7 +650,7 @@ fn print_report(
     if !ratios.is_empty() {
         println!();
         println!(
-            "{:>6}  {:<27} {:>6} {:>6} {:>6}  goal: shoal adds < 10 % at p50 and p99",
+            "{:>8}  {:<27} {:>6} {:>6} {:>6}  goal: shoal adds < 10 % at p50 and p99",
             "size", "ratio", "p50", "p99", "p99.9"
         );
         for r in ratios {
@@ -649,8 +660,8 @@ fn print_report(
                 (true, false) => "MISSED",
             };
             println!(
-                "{:>6}  {:<27} {:>6.2} {:>6.2} {:>6.2}  {verdict}",
-                format!("{} B", r.size),
+                "{:>8}  {:<27} {:>6.2} {:>6.2} {:>6.2}  {verdict}",
+                size_label(r.size),
                 format!("{} / {}", r.case, r.baseline),
                 r.p50,
                 r.p99,
@@ -658,8 +669,64 @@ fn print_report(
             );
         }
     }
+    print_zero_copy(stats);
     if !costs.is_empty() {
         print_costs(costs);
+    }
+}
+
+/// `256 B`, `4 KiB`, `256 KiB`, `1 MiB`.
+fn size_label(size: usize) -> String {
+    if size >= 1 << 20 && size.is_multiple_of(1 << 20) {
+        format!("{} MiB", size >> 20)
+    } else if size >= 1 << 10 && size.is_multiple_of(1 << 10) {
+        format!("{} KiB", size >> 10)
+    } else {
+        format!("{size} B")
+    }
+}
+
+/// The zero-copy goals (issue 18): shoal's blocking round trip against a
+/// Unix socket's, at most this fraction, per size.
+const ZERO_COPY_GOALS: [(usize, f64); 2] = [(256 * 1024, 0.5), (1024 * 1024, 0.25)];
+
+/// The zero-copy lines of the report: shoal-event against uds at the large
+/// sizes, and how flat polling stays from the smallest size to the largest.
+fn print_zero_copy(stats: &[Stats]) {
+    let find = |case: &str, size: usize| stats.iter().find(|s| s.case == case && s.size == size);
+    let mut lines = Vec::new();
+    for (size, goal) in ZERO_COPY_GOALS {
+        if let (Some(a), Some(b)) = (find("shoal-event", size), find("uds", size)) {
+            let r = a.p50 / b.p50;
+            lines.push(format!(
+                "{:>8}  shoal-event / uds p50 {r:.2} (goal ≤ {goal}: {})",
+                size_label(size),
+                if r <= goal { "met" } else { "MISSED" }
+            ));
+        }
+    }
+    let polls: Vec<&Stats> = stats.iter().filter(|s| s.case == "shoal-poll").collect();
+    if let (Some(small), Some(large)) = (
+        polls.iter().min_by_key(|s| s.size),
+        polls.iter().max_by_key(|s| s.size),
+    ) {
+        if large.size > small.size {
+            let r = large.p50 / small.p50;
+            lines.push(format!(
+                "{:>8}  shoal-poll p50 {} / {}: {r:.2} (goal ≤ 2, flat: {})",
+                "",
+                size_label(large.size),
+                size_label(small.size),
+                if r <= 2.0 { "met" } else { "MISSED" }
+            ));
+        }
+    }
+    if !lines.is_empty() {
+        println!();
+        println!("zero copy: the large sizes travel in place");
+        for l in lines {
+            println!("{l}");
+        }
     }
 }
 
