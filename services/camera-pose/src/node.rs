@@ -93,13 +93,9 @@ impl CameraTask {
         let index = scenario
             .vehicle_index(me)
             .context("vehicle not in scenario")?;
-        let parent_name = scenario.vehicles[index]
-            .parent
-            .as_ref()
-            .context("camera-pose runs on followers only")?;
         let parent = scenario
-            .vehicle_index(parent_name)
-            .context("parent not in scenario")?;
+            .parent_index(index)
+            .context("camera-pose runs on followers only, whose parent is in the scenario")?;
         let cam_cfg: CameraConfig = scenario.section("camera")?;
         let layout: BeaconLayout = scenario.section("beacons")?;
         let pose_cfg: PoseConfig = scenario.section("pose")?;
@@ -232,15 +228,8 @@ impl Task for CameraTask {
             };
         }
         let origin = Origin::of(&w.header);
-        let mut b = Beacons::zeroed();
-        for i in 0..obs.count.min(ipc_types::MAX_BEACONS) {
-            b.pixels_uv[2 * i] = obs.pixels[i][0];
-            b.pixels_uv[2 * i + 1] = obs.pixels[i][1];
-            b.visible[i] = u8::from(obs.visible[i]);
-        }
-        b.count = obs.count as u32;
-        b.visible_count = obs.visible_count() as u32;
-        self.beacons_out.publish(b, ctx, origin)?;
+        self.beacons_out
+            .publish(beacons_sample(&obs), ctx, origin)?;
 
         // From here on only the observation is used.
         let est = self.estimator.estimate(&obs);
@@ -294,14 +283,7 @@ impl CameraTask {
             };
             status = 2;
         }
-        let mut b = Beacons::zeroed();
-        for i in 0..obs.count.min(ipc_types::MAX_BEACONS) {
-            b.pixels_uv[2 * i] = obs.pixels[i][0];
-            b.pixels_uv[2 * i + 1] = obs.pixels[i][1];
-            b.visible[i] = u8::from(obs.visible[i]);
-        }
-        b.count = obs.count as u32;
-        b.visible_count = obs.visible_count() as u32;
+        let mut b = beacons_sample(&obs);
         b.blobs = if fault == FrameFault::Blind {
             0
         } else {
@@ -374,6 +356,20 @@ fn src_last_fix(source: &Source) -> Option<(f64, Isometry3<f64>)> {
         Source::Image(src) => src.last_fix,
         _ => None,
     }
+}
+
+/// The `beacons` sample of an observation: each beacon's pixel and
+/// whether it was seen.
+fn beacons_sample(obs: &BeaconObservation) -> Beacons {
+    let mut b = Beacons::zeroed();
+    for i in 0..obs.count.min(ipc_types::MAX_BEACONS) {
+        b.pixels_uv[2 * i] = obs.pixels[i][0];
+        b.pixels_uv[2 * i + 1] = obs.pixels[i][1];
+        b.visible[i] = u8::from(obs.visible[i]);
+    }
+    b.count = obs.count as u32;
+    b.visible_count = obs.visible_count() as u32;
+    b
 }
 
 /// A `leader_pose` sample for a fix.

@@ -33,13 +33,9 @@ impl CameraSimTask {
         let index = scenario
             .vehicle_index(me)
             .context("vehicle not in scenario")?;
-        let parent_name = scenario.vehicles[index]
-            .parent
-            .as_ref()
-            .context("camera-sim runs on followers only")?;
         let parent = scenario
-            .vehicle_index(parent_name)
-            .context("parent not in scenario")?;
+            .parent_index(index)
+            .context("camera-sim runs on followers only, whose parent is in the scenario")?;
         let camera: CameraConfig = scenario.section("camera")?;
         let layout: BeaconLayout = scenario.section("beacons")?;
         let hull: HullConfig = scenario.section("hull")?;

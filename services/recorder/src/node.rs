@@ -92,14 +92,7 @@ impl Tap for ImageTap {
         arena: &mut Vec<u8>,
         out: &mut Vec<Pending>,
     ) -> Result<(), RuntimeError> {
-        let any_time = StepContext {
-            sim_time_ns: u64::MAX,
-            tick: 0,
-            wake_mono_ns: 0,
-            since_last_ns: 0,
-            last: false,
-            mode: shoal_runtime::Mode::Realtime,
-        };
+        let any_time = StepContext::any_time();
         let (every, frame_id) = (self.every, &self.frame_id);
         self.sub
             .take_ready_in_place(ctx.unwrap_or(&any_time), |img| {

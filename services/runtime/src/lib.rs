@@ -249,6 +249,19 @@ pub struct StepContext {
 }
 
 impl StepContext {
+    /// A context at which every sample is ready, whatever its stamp (a
+    /// final drain, replay, outside readers).
+    pub fn any_time() -> Self {
+        Self {
+            sim_time_ns: u64::MAX,
+            tick: 0,
+            wake_mono_ns: 0,
+            since_last_ns: 0,
+            last: false,
+            mode: Mode::Realtime,
+        }
+    }
+
     /// Simulation time in seconds.
     pub fn sim_time_s(&self) -> f64 {
         self.sim_time_ns as f64 * 1e-9

@@ -239,15 +239,19 @@ impl<T: Sample, S: Service> Publisher<T, S> {
             .loan_uninit()
             .map_err(|e| self.send_error(iceoryx2::port::SendError::from(e)))?;
         let mut out = loan.write_payload(sample);
-        let h = out.payload_mut().header_mut();
+        self.stamp(out.payload_mut().header_mut(), ctx, origin, publish_mono_ns);
+        out.send().map_err(|e| self.send_error(e))?;
+        self.seq += 1;
+        Ok(())
+    }
+
+    /// Writes this publisher's stamps into a header about to be sent.
+    fn stamp(&self, h: &mut Header, ctx: &StepContext, origin: Origin, publish_mono_ns: u64) {
         h.seq = self.seq;
         h.sim_time_ns = ctx.sim_time_ns;
         h.origin_mono_ns = origin.mono_ns;
         h.origin_sim_time_ns = origin.sim_time_ns;
         h.publish_mono_ns = publish_mono_ns;
-        out.send().map_err(|e| self.send_error(e))?;
-        self.seq += 1;
-        Ok(())
     }
 
     /// Publishes a sample written in place: `fill` gets the loaned
@@ -280,13 +284,7 @@ impl<T: Sample, S: Service> Publisher<T, S> {
                 service: self.service.clone(),
             });
         }
-        let publish_mono_ns = mono_ns();
-        let h = out.payload_mut().header_mut();
-        h.seq = self.seq;
-        h.sim_time_ns = ctx.sim_time_ns;
-        h.origin_mono_ns = origin.mono_ns;
-        h.origin_sim_time_ns = origin.sim_time_ns;
-        h.publish_mono_ns = publish_mono_ns;
+        self.stamp(out.payload_mut().header_mut(), ctx, origin, mono_ns());
         out.send().map_err(|e| self.send_error(e))?;
         self.seq += 1;
         Ok(())
@@ -503,15 +501,7 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
     /// Every held and arrived sample regardless of its stamp, oldest first
     /// (a final drain, replay, outside readers).
     pub fn take_all(&mut self, f: impl FnMut(T)) -> Result<(), RuntimeError> {
-        let any_time = StepContext {
-            sim_time_ns: u64::MAX,
-            tick: 0,
-            wake_mono_ns: 0,
-            since_last_ns: 0,
-            last: false,
-            mode: Mode::Realtime,
-        };
-        self.take_ready(&any_time, f)
+        self.take_ready(&StepContext::any_time(), f)
     }
 
     /// The newest ready sample, if any arrived since the last call.
@@ -539,22 +529,10 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
                 // Full: the oldest is superseded by the one queued behind it.
                 self.held_in_place.pop_front();
             }
-            let received = self.inner.receive().map_err(|e| RuntimeError::Io {
-                service: self.service.clone(),
-                source: Box::new(e),
-            })?;
-            let Some(sample) = received else {
-                break;
-            };
-            let taken = mono_ns();
-            let publisher = sample.header().publisher_id().value();
-            let h = *sample.payload().header();
-            let finite = sample.payload().is_finite();
-            self.account(publisher, &h, taken, finite);
-            if finite {
-                self.held_in_place.push_back(sample);
-            } else {
-                tracing::warn!(service = %self.service, seq = h.seq, "rejected a sample with a non-finite value");
+            match self.receive_in_place()? {
+                None => break,
+                Some(Some(sample)) => self.held_in_place.push_back(sample),
+                Some(None) => {}
             }
         }
         let ready = self
@@ -590,21 +568,11 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
             }
         }
         while self.held_in_place.len() < BORROWED_SAMPLES {
-            let received = self.inner.receive().map_err(|e| RuntimeError::Io {
-                service: self.service.clone(),
-                source: Box::new(e),
-            })?;
-            let Some(sample) = received else {
-                break;
+            let sample = match self.receive_in_place()? {
+                None => break,
+                Some(None) => continue,
+                Some(Some(sample)) => sample,
             };
-            let taken = mono_ns();
-            let publisher = sample.header().publisher_id().value();
-            let h = *sample.payload().header();
-            let finite = sample.payload().is_finite();
-            self.account(publisher, &h, taken, finite);
-            if !finite {
-                continue;
-            }
             if self.held_in_place.is_empty() && self.ready(ctx, sample.payload()) {
                 f(sample.payload());
             } else {
@@ -612,6 +580,33 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
             }
         }
         Ok(())
+    }
+
+    /// Receives one sample without copying it and books it: `None` when
+    /// nothing waits, `Some(None)` for a sample refused for a non-finite
+    /// value (booked, logged, released).
+    #[allow(clippy::type_complexity)]
+    fn receive_in_place(
+        &mut self,
+    ) -> Result<Option<Option<iceoryx2::sample::Sample<S, T, ()>>>, RuntimeError> {
+        let received = self.inner.receive().map_err(|e| RuntimeError::Io {
+            service: self.service.clone(),
+            source: Box::new(e),
+        })?;
+        let Some(sample) = received else {
+            return Ok(None);
+        };
+        let taken = mono_ns();
+        let publisher = sample.header().publisher_id().value();
+        let h = *sample.payload().header();
+        let finite = sample.payload().is_finite();
+        self.account(publisher, &h, taken, finite);
+        if finite {
+            Ok(Some(Some(sample)))
+        } else {
+            tracing::warn!(service = %self.service, seq = h.seq, "rejected a sample with a non-finite value");
+            Ok(Some(None))
+        }
     }
 
     /// Books one received sample: latency, sequence gaps, rejection.

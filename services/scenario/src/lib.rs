@@ -1026,6 +1026,13 @@ impl Scenario {
         self.vehicles.iter().position(|v| v.name == name)
     }
 
+    /// Index of the parent of vehicle `index`: `None` for the leader (or a
+    /// parent the scenario does not hold, which `validate` refuses).
+    pub fn parent_index(&self, index: usize) -> Option<usize> {
+        let parent = self.vehicles.get(index)?.parent.as_deref()?;
+        self.vehicle_index(parent)
+    }
+
     /// Start position (NED, m) and heading (rad) of every vehicle, resolved:
     /// a follower without an explicit start sits in its slot behind its
     /// parent's start, with the parent's heading.
