@@ -268,16 +268,7 @@ impl<T: Sample, S: Service> Publisher<T, S> {
         origin: Origin,
         fill: impl FnOnce(&mut T),
     ) -> Result<(), RuntimeError> {
-        let loan = self
-            .inner
-            .loan_uninit()
-            .map_err(|e| self.send_error(iceoryx2::port::SendError::from(e)))?;
-        #[allow(unsafe_code)]
-        // SAFETY: `T: Pod`, so every byte pattern is a valid `T`; the chunk
-        // lies in a shared-memory segment that the OS zero-filled when it was
-        // created and that has only ever held whole `T` values of this
-        // service since, so all of its bytes are initialised.
-        let mut out = unsafe { loan.assume_init() };
+        let mut out = self.loan_in_place()?;
         fill(out.payload_mut());
         if !out.payload().is_finite() {
             return Err(RuntimeError::NonFinite {
@@ -296,18 +287,25 @@ impl<T: Sample, S: Service> Publisher<T, S> {
         &mut self,
         fill: impl FnOnce(&mut T),
     ) -> Result<(), RuntimeError> {
+        let mut out = self.loan_in_place()?;
+        fill(out.payload_mut());
+        out.send().map_err(|e| self.send_error(e))?;
+        self.seq += 1;
+        Ok(())
+    }
+
+    /// A loaned chunk to write a sample into where it lies.
+    fn loan_in_place(&self) -> Result<iceoryx2::sample_mut::SampleMut<S, T, ()>, RuntimeError> {
         let loan = self
             .inner
             .loan_uninit()
             .map_err(|e| self.send_error(iceoryx2::port::SendError::from(e)))?;
         #[allow(unsafe_code)]
-        // SAFETY: as in `publish_in_place`: `T: Pod` and the chunk's bytes
-        // are initialised shared memory.
-        let mut out = unsafe { loan.assume_init() };
-        fill(out.payload_mut());
-        out.send().map_err(|e| self.send_error(e))?;
-        self.seq += 1;
-        Ok(())
+        // SAFETY: `T: Pod`, so every byte pattern is a valid `T`; the chunk
+        // lies in a shared-memory segment that the OS zero-filled when it was
+        // created and that has only ever held whole `T` values of this
+        // service since, so all of its bytes are initialised.
+        Ok(unsafe { loan.assume_init() })
     }
 
     fn send_error(&self, e: iceoryx2::port::SendError) -> RuntimeError {
