@@ -3,6 +3,8 @@
 //!
 //! - `render_512`: the renderer on the paper's geometry (parent 9 m ahead,
 //!   a second vehicle's lamps and hull beside it).
+//! - `render_512_crowd_100`: the same in the middle of a 10 × 10 grid of
+//!   vehicles 8 m apart.
 //! - `detect_512`: thresholds, connected components and centroids on that frame.
 //! - `identify_4`: which blob is which beacon (tracking gate).
 //! - `frame_512`: all three plus the PnP, as the two processes do per frame.
@@ -39,6 +41,23 @@ fn bench_frame(c: &mut Criterion) {
         b.iter(|| {
             seed += 1;
             black_box(r.render(black_box(&scene), 0, Some(1), seed, &mut img))
+        })
+    });
+    // A crowd: the camera in the middle of a 10 × 10 grid 8 m apart (a
+    // 100-vehicle formation), every hull and lamp in reach drawn.
+    let crowd: Vec<Isometry3<f64>> = (0..100)
+        .map(|i| {
+            pose(
+                8.0 * f64::from(i / 10) - 40.0,
+                8.0 * f64::from(i % 10) - 36.0,
+            )
+        })
+        .collect();
+    c.bench_function("render_512_crowd_100", |b| {
+        let mut seed = 0;
+        b.iter(|| {
+            seed += 1;
+            black_box(r.render(black_box(&crowd), 44, Some(54), seed, &mut img))
         })
     });
     let cfg = DetectConfig::default();
