@@ -1,7 +1,7 @@
 //! The renderer: one 8-bit mono frame of the scene, written in place.
 
 use camera_pose::{BeaconLayout, Camera, CameraConfig, HullConfig};
-use nalgebra::{Isometry3, Point3, Vector3};
+use nalgebra::{Isometry3, Point3};
 use rand::rngs::SmallRng;
 use rand::{RngCore, SeedableRng};
 
@@ -353,18 +353,27 @@ impl Renderer {
         if u0 >= u1 || v0 >= v1 {
             return false;
         }
+        // Per pixel, the silhouette test in the image: the pixel's distance
+        // to the projected axis against the radius projected at that point's
+        // depth (a capsule's outline under perspective, to within the
+        // foreshortening of its ends); the water in front of the hull is
+        // the distance to that point of the axis, less the radius.
         let f = self.camera.focal_px();
-        let [cx, cy] = self.camera.principal_point_px();
-        let r2 = r * r;
+        let d = [pb[0] - pa[0], pb[1] - pa[1]];
+        let dd = (d[0] * d[0] + d[1] * d[1]).max(1e-12);
         let mut any = false;
         for v in v0..v1 {
             let band = self.band_dn[band_of(v, self.height)];
-            let dy = (v as f64 + 0.5 - cy) / f;
+            let y = v as f64 + 0.5;
             for u in u0..u1 {
-                let dx = (u as f64 + 0.5 - cx) / f;
-                let dir = Vector3::new(dx, dy, 1.0).normalize();
-                if let Some(t) = ray_capsule(&dir, &a, &b, r2) {
-                    let water = band * (1.0 - (-self.c * t).exp());
+                let x = u as f64 + 0.5;
+                let t = (((x - pa[0]) * d[0] + (y - pa[1]) * d[1]) / dd).clamp(0.0, 1.0);
+                let (qx, qy) = (pa[0] + t * d[0], pa[1] + t * d[1]);
+                let axis = a + (b - a) * t;
+                let radius_px = f * r / axis.z;
+                let (ex, ey) = (x - qx, y - qy);
+                if ex * ex + ey * ey < radius_px * radius_px {
+                    let water = band * (1.0 - (-self.c * (axis.coords.norm() - r).max(0.0)).exp());
                     self.signal[v * self.width + u] += (water - band) as f32;
                     any = true;
                 }
@@ -427,25 +436,6 @@ fn band_of(v: usize, height: usize) -> usize {
 
 fn quantise(dn: f64) -> u8 {
     dn.round().clamp(0.0, 255.0) as u8
-}
-
-/// Distance along the unit ray `dir` from the origin to where it first
-/// meets the capsule of axis `a`–`b` and squared radius `r2`, if it does
-/// (the closest approach of ray and axis is taken as the hit: exact on the
-/// silhouette's outline, within a radius inside it).
-fn ray_capsule(dir: &Vector3<f64>, a: &Point3<f64>, b: &Point3<f64>, r2: f64) -> Option<f64> {
-    let far = Point3::from(dir * 1e3);
-    let origin = Point3::origin();
-    let d2 = camera_pose::segment_distance_sq(&origin, &far, a, b);
-    if d2 >= r2 {
-        return None;
-    }
-    // Along the ray to the axis's closest point, less the chord's half.
-    let ab = b - a;
-    let t = (a.coords.dot(&ab) / ab.norm_squared().max(1e-12)).clamp(0.0, 1.0);
-    let p = a + ab * t;
-    let along = p.coords.dot(dir);
-    Some((along - (r2 - d2).sqrt()).max(0.0))
 }
 
 /// The standard normal quantile function (Acklam's rational
