@@ -64,6 +64,8 @@ pub struct CampaignOptions {
     /// Run the paper's method as published (`[method] generalised = false`):
     /// the "before" of a change to the method.
     pub published: bool,
+    /// Camera model of every course.
+    pub camera: shoal_scenario::CameraModel,
 }
 
 /// One run of the campaign.
@@ -249,6 +251,7 @@ fn write_courses(o: &CampaignOptions, jobs: &[Job]) -> anyhow::Result<()> {
             course: Some(j.family),
             course_seed: Some(j.course_seed),
             name: Some(j.name.clone()),
+            camera: o.camera,
             ..GenOptions::default()
         })
         .with_context(|| format!("generating {}", j.name))?;
@@ -421,6 +424,7 @@ mod tests {
             keep_recordings: false,
             quiet: true,
             published: false,
+            camera: shoal_scenario::CameraModel::Point,
         }
     }
 

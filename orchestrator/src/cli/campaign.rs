@@ -59,6 +59,9 @@ pub struct CampaignCmd {
     /// to measure a change to the method against it.
     #[arg(long)]
     published: bool,
+    /// Camera model of every course (as `shoal gen --camera`).
+    #[arg(long, value_enum, default_value_t = crate::cli::gen::CameraArg::Point)]
+    camera: crate::cli::gen::CameraArg,
 }
 
 /// Runs the campaign, prints its table; exit status 3 if a run failed.
@@ -93,6 +96,7 @@ pub fn run(cmd: CampaignCmd) -> anyhow::Result<()> {
         keep_recordings: cmd.keep_recordings,
         quiet: cmd.quiet,
         published: cmd.published,
+        camera: cmd.camera.into(),
     };
     let report = campaign::run(&o)?;
     print!("{}", report.markdown());

@@ -47,6 +47,28 @@ pub struct GenCmd {
     /// Scenario name (default `gen-<shape>-<N>-s<seed>`).
     #[arg(long)]
     pub name: Option<String>,
+    /// Camera model: point (beacon pixels from the truth) or image (rendered
+    /// frames, a camera-sim process per follower, a 0.01 s tick).
+    #[arg(long, value_enum, default_value_t = CameraArg::Point)]
+    pub camera: CameraArg,
+}
+
+/// `--camera` of `shoal gen` and `shoal campaign`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum CameraArg {
+    /// Beacon pixels projected from the truth.
+    Point,
+    /// Rendered frames in which camera-pose finds the beacons.
+    Image,
+}
+
+impl From<CameraArg> for shoal_scenario::CameraModel {
+    fn from(c: CameraArg) -> Self {
+        match c {
+            CameraArg::Point => Self::Point,
+            CameraArg::Image => Self::Image,
+        }
+    }
 }
 
 impl From<&GenCmd> for GenOptions {
@@ -62,6 +84,7 @@ impl From<&GenCmd> for GenOptions {
             name: c.name.clone(),
             course: c.course,
             course_seed: c.course_seed,
+            camera: c.camera.into(),
         }
     }
 }

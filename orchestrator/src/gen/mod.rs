@@ -191,6 +191,9 @@ pub struct GenOptions {
     /// The course's own seed (where and how its obstacles stand; `None`:
     /// `seed`), so one course can be run with several noise seeds.
     pub course_seed: Option<u64>,
+    /// The camera model (`[camera] model`); with images the tick is the
+    /// 0.01 s that a six-stage frame needs.
+    pub camera: shoal_scenario::CameraModel,
 }
 
 impl Default for GenOptions {
@@ -204,6 +207,7 @@ impl Default for GenOptions {
             name: None,
             course: None,
             course_seed: None,
+            camera: shoal_scenario::CameraModel::Point,
         }
     }
 }

@@ -198,6 +198,13 @@ pub(super) fn render_settings(t: &mut String, p: &Plan) -> std::fmt::Result {
     writeln!(t, "seed = {}", o.seed)?;
     writeln!(t, "duration_s = {}", num(p.duration_s))?;
     writeln!(t)?;
+    let images = o.camera == shoal_scenario::CameraModel::Image;
+    if images {
+        // Six stages a frame at 10 Hz (camera-sim before camera-pose).
+        writeln!(t, "[rates]")?;
+        writeln!(t, "tick_s = 0.01")?;
+        writeln!(t)?;
+    }
     writeln!(t, "[safety]")?;
     writeln!(t, "safe_distance_m = {}", num(SAFE_DISTANCE_M))?;
     writeln!(t, "collision_distance_m = 0.8")?;
@@ -208,6 +215,9 @@ pub(super) fn render_settings(t: &mut String, p: &Plan) -> std::fmt::Result {
         "visibility_range_m = {}",
         num(CameraConfig::default().visibility_range_m)
     )?;
+    if images {
+        writeln!(t, "model = \"image\"")?;
+    }
     writeln!(t)?;
     writeln!(t, "[mission]")?;
     let waypoints = match &p.course {

@@ -471,3 +471,24 @@ fn families_draw_what_they_say() {
         GenError::PaperSize(6)
     );
 }
+
+#[test]
+fn with_images_the_generated_file_asks_for_them_and_the_six_stage_tick() {
+    let o = GenOptions {
+        camera: shoal_scenario::CameraModel::Image,
+        ..opts(Shape::Paper, 5, 2, 4.0)
+    };
+    let s = verify(&o);
+    assert_eq!(s.camera_model(), shoal_scenario::CameraModel::Image);
+    assert!(s.divisor(s.rates.camera_hz) >= shoal_scenario::CameraModel::Image.stages());
+    let followers = s.vehicles.iter().filter(|v| v.parent.is_some()).count();
+    let sims = s
+        .processes()
+        .iter()
+        .filter(|p| p.kind == shoal_scenario::ProcessKind::CameraSim)
+        .count();
+    assert_eq!(sims, followers, "a renderer per follower");
+    // Points by default: the same course without a renderer.
+    let p = verify(&opts(Shape::Paper, 5, 2, 4.0));
+    assert_eq!(p.camera_model(), shoal_scenario::CameraModel::Point);
+}
