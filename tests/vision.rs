@@ -71,7 +71,7 @@ fn camera_pose_finds_its_parent_in_rendered_frames_and_opencv_agrees() {
 }
 
 #[test]
-fn a_rerun_of_camera_pose_on_every_recorded_frame_reproduces_it() {
+fn reruns_of_camera_pose_and_camera_sim_on_every_recorded_frame_reproduce_them() {
     let tmp = tempfile::tempdir().unwrap();
     let out = image_run(tmp.path());
     let rec = out.join("recording.mcap");
@@ -86,6 +86,21 @@ fn a_rerun_of_camera_pose_on_every_recorded_frame_reproduces_it() {
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(
         text.contains("no differences over 120 steps"),
+        "{text}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // The renderer too: the same frames, byte for byte, from the recorded world.
+    let o = run_shoal_ok(&[
+        "replay",
+        rec.to_str().unwrap(),
+        "--rerun",
+        "camera-sim",
+        "--vehicle",
+        "F1",
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("no differences over 120 steps (/F1/image: 120)"),
         "{text}{}",
         String::from_utf8_lossy(&o.stderr)
     );

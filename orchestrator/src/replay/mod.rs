@@ -456,12 +456,59 @@ impl<T: Sample> AnyTap for TypedTap<T> {
     }
 }
 
+/// A re-run's camera frames, written as the recorder writes them (every
+/// `every`-th frame, `sensor_msgs/msg/Image`) so that they compare byte for
+/// byte with the recorded ones.
+struct ImageTap {
+    sub: Subscriber<ipc_types::Image>,
+    frame_id: String,
+    every: u32,
+}
+
+impl AnyTap for ImageTap {
+    fn take(&mut self, out: &mut Vec<Vec<u8>>) -> anyhow::Result<()> {
+        let (frame_id, every) = (&self.frame_id, self.every);
+        self.sub
+            .take_ready_in_place(&shoal_runtime::StepContext::any_time(), |img| {
+                if img.frame % every == 0 {
+                    let mut body = Vec::with_capacity(img.pixels().len() + 64);
+                    recordings::image::encode(img, frame_id, &mut body);
+                    out.push(body);
+                }
+            })?;
+        Ok(())
+    }
+}
+
+/// Every how many frames the recorder of `scenario` kept one.
+fn frames_recorded_every(scenario: &Scenario) -> anyhow::Result<u32> {
+    let camera: camera_pose::CameraConfig = scenario.section("camera")?;
+    Ok((scenario.rates.camera_hz / camera.record_hz)
+        .round()
+        .max(1.0) as u32)
+}
+
 fn open_tap(
     node: &iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
     schema: &str,
     service: &str,
     limits: &ChannelLimits,
+    scenario: &Scenario,
 ) -> anyhow::Result<Box<dyn AnyTap>> {
+    if schema == recordings::image::SCHEMA_NAME {
+        // shoal/<run>/<vehicle>/image
+        let vehicle = service.rsplit('/').nth(1).unwrap_or_default();
+        return Ok(Box::new(ImageTap {
+            sub: shoal_runtime::node_subscriber::<ipc_types::Image, _>(
+                node,
+                service,
+                limits,
+                limits.max_buffer,
+            )?,
+            frame_id: recordings::image::frame_id(vehicle),
+            every: frames_recorded_every(scenario)?,
+        }));
+    }
     fn typed<T: Sample>(
         node: &iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
         service: &str,
@@ -472,6 +519,24 @@ fn open_tap(
         }))
     }
     ipc_types::with_sample_type!(schema, T => typed::<T>(node, service, limits), else bail!("no sample type for schema {schema}"))
+}
+
+/// The sequence number and simulated time (s) of the `k`-th sample of a
+/// stream, from its bytes: shoal's header, or a camera frame's stamp.
+fn position_of(schema: &str, bytes: &[u8], k: usize) -> (u64, f64) {
+    if schema == recordings::image::SCHEMA_NAME {
+        let mut data = recordings::CDR_HEADER.to_vec();
+        data.extend_from_slice(bytes);
+        let t = recordings::image::read(&data).map_or(0, |f| f.stamp_ns);
+        return (k as u64, t as f64 * 1e-9);
+    }
+    match bytes.get(..std::mem::size_of::<Header>()) {
+        Some(h) => {
+            let header: Header = bytemuck::pod_read_unaligned(h);
+            (header.seq, header.sim_time_ns as f64 * 1e-9)
+        }
+        None => (k as u64, 0.0),
+    }
 }
 
 /// Spawns the process, feeds it tick by tick and compares its outputs.
@@ -531,6 +596,7 @@ fn drive(
                 &schema,
                 &service_of(run_id, t),
                 &limits_of(t, vehicles, 1),
+                scenario,
             )?,
             schema,
         });
@@ -591,12 +657,11 @@ fn drive(
                     Some(exp) => recordings::first_field_difference(&tap.schema, exp, bytes),
                 };
                 if let Some((field, recorded, rerun)) = d {
-                    let header: Header =
-                        bytemuck::pod_read_unaligned(&bytes[..std::mem::size_of::<Header>()]);
+                    let (seq, sim_time_s) = position_of(&tap.schema, bytes, k);
                     difference = Some(Difference {
                         topic: tap.topic.clone(),
-                        seq: header.seq,
-                        sim_time_s: header.sim_time_ns as f64 * 1e-9,
+                        seq,
+                        sim_time_s,
                         field,
                         recorded,
                         rerun,
@@ -611,12 +676,11 @@ fn drive(
         for tap in &taps {
             if tap.next < tap.expected.len() {
                 let exp = &tap.expected[tap.next];
-                let header: Header =
-                    bytemuck::pod_read_unaligned(&exp[..std::mem::size_of::<Header>()]);
+                let (seq, sim_time_s) = position_of(&tap.schema, exp, tap.next);
                 difference = Some(Difference {
                     topic: tap.topic.clone(),
-                    seq: header.seq,
-                    sim_time_s: header.sim_time_ns as f64 * 1e-9,
+                    seq,
+                    sim_time_s,
                     field: "(missing sample)".into(),
                     recorded: "a sample".into(),
                     rerun: "none".into(),
