@@ -31,7 +31,7 @@ use ipc_types::{Beacons, Channel, Image, LeaderPose, RunChannel, Sample, World};
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use shoal_runtime::convert::{arr, seed_for, world_pose, wxyz};
+use shoal_runtime::convert::{arr, seed_for, wxyz};
 use shoal_runtime::ports::Origin;
 use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
 use shoal_scenario::faults::{Fault, FaultAction};
@@ -82,7 +82,11 @@ pub struct CameraTask {
     world_in: Option<Subscriber<World>>,
     beacons_out: Publisher<Beacons>,
     pose_out: Publisher<LeaderPose>,
-    world: Option<World>,
+    /// Every vehicle's pose in the newest world snapshot (point model and
+    /// acoustic baseline), read out of shared memory in place.
+    poses: Vec<nalgebra::Isometry3<f64>>,
+    /// The snapshot's origin; `None` until the first one.
+    world_origin: Option<Origin>,
     occluders: Vec<Capsule>,
     faults: CameraFaults,
 }
@@ -153,20 +157,21 @@ impl CameraTask {
             },
             beacons_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Beacons), &lim)?,
             pose_out: rt.publisher(&ipc_types::service_name(run, me, Channel::LeaderPose), &lim)?,
-            world: None,
+            poses: Vec::with_capacity(scenario.vehicles.len()),
+            world_origin: None,
             occluders: Vec::with_capacity(scenario.vehicles.len()),
             faults: CameraFaults::new(&scenario.faults, me),
         })
     }
 
     /// The sensor: what the camera sees of the parent's beacons.
-    fn observe(&mut self, w: &World) -> BeaconObservation {
-        let me = world_pose(&w.vehicles[self.index]);
-        let parent = world_pose(&w.vehicles[self.parent]);
+    fn observe(&mut self) -> BeaconObservation {
+        let me = self.poses[self.index];
+        let parent = self.poses[self.parent];
         self.occluders.clear();
-        for (i, v) in w.vehicles[..w.count as usize].iter().enumerate() {
+        for (i, v) in self.poses.iter().enumerate() {
             if i != self.index && i != self.parent {
-                self.occluders.push(self.hull.capsule(&world_pose(v)));
+                self.occluders.push(self.hull.capsule(v));
             }
         }
         self.camera
@@ -179,21 +184,25 @@ impl Task for CameraTask {
         if matches!(self.source, Source::Image(_)) {
             return self.step_image(ctx);
         }
-        if let Some(w) = self
-            .world_in
-            .as_mut()
-            .map(|s| s.latest(ctx))
-            .transpose()?
-            .flatten()
-        {
-            self.world = Some(w);
+        if let Some(world_in) = self.world_in.as_mut() {
+            let poses = &mut self.poses;
+            let fresh = world_in.with_latest_in_place(ctx, |w| {
+                shoal_runtime::convert::world_poses(w, poses);
+                Origin::of(&w.header)
+            })?;
+            if fresh.is_some() {
+                self.world_origin = fresh;
+            }
         }
-        let Some(w) = self.world else {
+        let Some(origin) = self.world_origin else {
             return Ok(());
         };
+        if self.index.max(self.parent) >= self.poses.len() {
+            return Ok(());
+        }
         if let Source::Acoustic(modem) = &mut self.source {
-            let me = world_pose(&w.vehicles[self.index]);
-            let parent = world_pose(&w.vehicles[self.parent]);
+            let me = self.poses[self.index];
+            let parent = self.poses[self.parent];
             let truth = me.inverse() * parent;
             let now = shoal_runtime::mono_ns();
             let packet = modem.step(ctx.sim_time_s(), now, &truth, &mut self.rng);
@@ -219,7 +228,7 @@ impl Task for CameraTask {
             // A lost frame: nothing was captured, so nothing is published.
             return Ok(());
         }
-        let mut obs = self.observe(&w);
+        let mut obs = self.observe();
         if fault == FrameFault::Blind {
             // The beacons are there but the camera sees none of them.
             obs = BeaconObservation {
@@ -227,7 +236,6 @@ impl Task for CameraTask {
                 ..BeaconObservation::default()
             };
         }
-        let origin = Origin::of(&w.header);
         self.beacons_out
             .publish(beacons_sample(&obs), ctx, origin)?;
 

@@ -10,7 +10,7 @@ use camera_pose::{BeaconLayout, CameraConfig, HullConfig};
 use camera_sim::{OpticsConfig, Renderer};
 use ipc_types::{Image, RunChannel, World};
 use nalgebra::Isometry3;
-use shoal_runtime::convert::{seed_for, world_pose};
+use shoal_runtime::convert::{seed_for, world_poses};
 use shoal_runtime::ports::Origin;
 use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
 use shoal_scenario::Scenario;
@@ -23,8 +23,10 @@ pub struct CameraSimTask {
     frame: u32,
     world_in: Subscriber<World>,
     image_out: Publisher<Image>,
-    world: Option<World>,
+    /// Every vehicle's pose in the newest world snapshot, read in place.
     poses: Vec<Isometry3<f64>>,
+    /// The snapshot's origin; `None` until the first one.
+    world_origin: Option<Origin>,
 }
 
 impl CameraSimTask {
@@ -62,24 +64,25 @@ impl CameraSimTask {
                 &ipc_types::image_service_name(run, me),
                 &ChannelLimits::image(),
             )?,
-            world: None,
             poses: Vec::with_capacity(scenario.vehicles.len()),
+            world_origin: None,
         })
     }
 }
 
 impl Task for CameraSimTask {
     fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
-        if let Some(w) = self.world_in.latest(ctx)? {
-            self.world = Some(w);
+        let poses = &mut self.poses;
+        let fresh = self.world_in.with_latest_in_place(ctx, |w| {
+            world_poses(w, poses);
+            Origin::of(&w.header)
+        })?;
+        if fresh.is_some() {
+            self.world_origin = fresh;
         }
-        let Some(w) = &self.world else {
+        let Some(origin) = self.world_origin else {
             return Ok(());
         };
-        self.poses.clear();
-        self.poses
-            .extend(w.vehicles[..w.count as usize].iter().map(world_pose));
-        let origin = Origin::of(&w.header);
         let (width, height) = (self.renderer.width(), self.renderer.height());
         let seed = seed_for(self.seed, self.frame as usize, 0);
         let frame = self.frame;

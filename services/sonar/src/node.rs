@@ -5,7 +5,7 @@ use ipc_types::{Channel, RunChannel, Sample, World};
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use shoal_runtime::convert::{seed_for, world_pose};
+use shoal_runtime::convert::{seed_for, world_poses};
 use shoal_runtime::ports::Origin;
 use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
 use shoal_scenario::Scenario;
@@ -18,7 +18,10 @@ pub struct SonarTask {
     rng: ChaCha8Rng,
     world_in: Subscriber<World>,
     out: Publisher<ipc_types::Sonar>,
-    world: Option<World>,
+    /// Every vehicle's pose in the newest world snapshot, read in place.
+    poses: Vec<Isometry3<f64>>,
+    /// The snapshot's origin; `None` until the first one.
+    world_origin: Option<Origin>,
     others: Vec<Isometry3<f64>>,
 }
 
@@ -45,7 +48,8 @@ impl SonarTask {
                 &ipc_types::service_name(run, me, Channel::Sonar),
                 &ChannelLimits::vehicle(),
             )?,
-            world: None,
+            poses: Vec::with_capacity(scenario.vehicles.len()),
+            world_origin: None,
             others: Vec::with_capacity(scenario.vehicles.len()),
         })
     }
@@ -53,17 +57,21 @@ impl SonarTask {
 
 impl Task for SonarTask {
     fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
-        if let Some(w) = self.world_in.latest(ctx)? {
-            self.world = Some(w);
+        let poses = &mut self.poses;
+        let fresh = self.world_in.with_latest_in_place(ctx, |w| {
+            world_poses(w, poses);
+            Origin::of(&w.header)
+        })?;
+        if fresh.is_some() {
+            self.world_origin = fresh;
         }
-        let Some(w) = &self.world else {
+        let (Some(origin), Some(&pose)) = (self.world_origin, self.poses.get(self.index)) else {
             return Ok(());
         };
-        let pose = world_pose(&w.vehicles[self.index]);
         self.others.clear();
-        for (i, v) in w.vehicles[..w.count as usize].iter().enumerate() {
+        for (i, v) in self.poses.iter().enumerate() {
             if i != self.index {
-                self.others.push(world_pose(v));
+                self.others.push(*v);
             }
         }
         let scan = self
@@ -71,7 +79,6 @@ impl Task for SonarTask {
             .scan(&self.field, &pose, &self.others, &mut self.rng);
         let mut s = ipc_types::Sonar::zeroed();
         scan.write_to(&mut s);
-        let origin = Origin::of(&w.header);
         self.out.publish(s, ctx, origin)?;
         Ok(())
     }
