@@ -27,13 +27,15 @@ use camera_pose::{
     PoseEstimator,
 };
 use camera_pose::{DetectConfig, Detector, Identifier, NoMatch, Prior};
-use ipc_types::{Beacons, Channel, Image, LeaderPose, RunChannel, Sample, World};
+use ipc_types::{Beacons, Channel, Image, LeaderPose, RunChannel, Sample};
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use shoal_runtime::convert::{arr, seed_for, wxyz};
 use shoal_runtime::ports::Origin;
-use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use shoal_runtime::{
+    ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError, WorldView,
+};
 use shoal_scenario::faults::{Fault, FaultAction};
 use shoal_scenario::Scenario;
 
@@ -79,14 +81,9 @@ pub struct CameraTask {
     rng: ChaCha8Rng,
     /// The world snapshot: read by the point model and the acoustic
     /// baseline only (their sensor simulation); never with images.
-    world_in: Option<Subscriber<World>>,
+    world: Option<WorldView>,
     beacons_out: Publisher<Beacons>,
     pose_out: Publisher<LeaderPose>,
-    /// Every vehicle's pose in the newest world snapshot (point model and
-    /// acoustic baseline), read out of shared memory in place.
-    poses: Vec<nalgebra::Isometry3<f64>>,
-    /// The snapshot's origin; `None` until the first one.
-    world_origin: Option<Origin>,
     occluders: Vec<Capsule>,
     faults: CameraFaults,
 }
@@ -146,19 +143,17 @@ impl CameraTask {
             index,
             parent,
             rng: ChaCha8Rng::seed_from_u64(seed_for(scenario.seed, index, 3)),
-            world_in: if images {
+            world: if images {
                 None
             } else {
-                Some(rt.subscriber(
+                Some(WorldView::new(rt.subscriber(
                     &ipc_types::run_service_name(run, RunChannel::World),
                     &ChannelLimits::world(scenario.vehicles.len()),
                     2,
-                )?)
+                )?))
             },
             beacons_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Beacons), &lim)?,
             pose_out: rt.publisher(&ipc_types::service_name(run, me, Channel::LeaderPose), &lim)?,
-            poses: Vec::with_capacity(scenario.vehicles.len()),
-            world_origin: None,
             occluders: Vec::with_capacity(scenario.vehicles.len()),
             faults: CameraFaults::new(&scenario.faults, me),
         })
@@ -166,10 +161,11 @@ impl CameraTask {
 
     /// The sensor: what the camera sees of the parent's beacons.
     fn observe(&mut self) -> BeaconObservation {
-        let me = self.poses[self.index];
-        let parent = self.poses[self.parent];
+        let poses = self.world.as_ref().map_or(&[][..], WorldView::poses);
+        let me = poses[self.index];
+        let parent = poses[self.parent];
         self.occluders.clear();
-        for (i, v) in self.poses.iter().enumerate() {
+        for (i, v) in poses.iter().enumerate() {
             if i != self.index && i != self.parent {
                 self.occluders.push(self.hull.capsule(v));
             }
@@ -184,25 +180,18 @@ impl Task for CameraTask {
         if matches!(self.source, Source::Image(_)) {
             return self.step_image(ctx);
         }
-        if let Some(world_in) = self.world_in.as_mut() {
-            let poses = &mut self.poses;
-            let fresh = world_in.with_latest_in_place(ctx, |w| {
-                shoal_runtime::convert::world_poses(w, poses);
-                Origin::of(&w.header)
-            })?;
-            if fresh.is_some() {
-                self.world_origin = fresh;
-            }
-        }
-        let Some(origin) = self.world_origin else {
+        let Some(world) = self.world.as_mut() else {
             return Ok(());
         };
-        if self.index.max(self.parent) >= self.poses.len() {
+        let Some(origin) = world.refresh(ctx)? else {
+            return Ok(());
+        };
+        let poses = world.poses();
+        if self.index.max(self.parent) >= poses.len() {
             return Ok(());
         }
+        let (me, parent) = (poses[self.index], poses[self.parent]);
         if let Source::Acoustic(modem) = &mut self.source {
-            let me = self.poses[self.index];
-            let parent = self.poses[self.parent];
             let truth = me.inverse() * parent;
             let now = shoal_runtime::mono_ns();
             let packet = modem.step(ctx.sim_time_s(), now, &truth, &mut self.rng);

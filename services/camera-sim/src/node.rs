@@ -8,11 +8,9 @@
 use anyhow::Context;
 use camera_pose::{BeaconLayout, CameraConfig, HullConfig};
 use camera_sim::{OpticsConfig, Renderer};
-use ipc_types::{Image, RunChannel, World};
-use nalgebra::Isometry3;
-use shoal_runtime::convert::{seed_for, world_poses};
-use shoal_runtime::ports::Origin;
-use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use ipc_types::{Image, RunChannel};
+use shoal_runtime::convert::seed_for;
+use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Task, TaskError, WorldView};
 use shoal_scenario::Scenario;
 
 pub struct CameraSimTask {
@@ -21,12 +19,8 @@ pub struct CameraSimTask {
     parent: usize,
     seed: u64,
     frame: u32,
-    world_in: Subscriber<World>,
+    world: WorldView,
     image_out: Publisher<Image>,
-    /// Every vehicle's pose in the newest world snapshot, read in place.
-    poses: Vec<Isometry3<f64>>,
-    /// The snapshot's origin; `None` until the first one.
-    world_origin: Option<Origin>,
 }
 
 impl CameraSimTask {
@@ -55,39 +49,33 @@ impl CameraSimTask {
             parent,
             seed: seed_for(scenario.seed, index, 4),
             frame: 0,
-            world_in: rt.subscriber(
+            world: WorldView::new(rt.subscriber(
                 &ipc_types::run_service_name(run, RunChannel::World),
                 &ChannelLimits::world(scenario.vehicles.len()),
                 2,
-            )?,
+            )?),
             image_out: rt.publisher(
                 &ipc_types::image_service_name(run, me),
                 &ChannelLimits::image(),
             )?,
-            poses: Vec::with_capacity(scenario.vehicles.len()),
-            world_origin: None,
         })
     }
 }
 
 impl Task for CameraSimTask {
     fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
-        let poses = &mut self.poses;
-        let fresh = self.world_in.with_latest_in_place(ctx, |w| {
-            world_poses(w, poses);
-            Origin::of(&w.header)
-        })?;
-        if fresh.is_some() {
-            self.world_origin = fresh;
-        }
-        let Some(origin) = self.world_origin else {
+        let Some(origin) = self.world.refresh(ctx)? else {
             return Ok(());
         };
         let (width, height) = (self.renderer.width(), self.renderer.height());
         let seed = seed_for(self.seed, self.frame as usize, 0);
         let frame = self.frame;
-        let (renderer, poses, own, parent) =
-            (&mut self.renderer, &self.poses, self.index, self.parent);
+        let (renderer, poses, own, parent) = (
+            &mut self.renderer,
+            self.world.poses(),
+            self.index,
+            self.parent,
+        );
         let mut stats = camera_sim::FrameStats::default();
         self.image_out.publish_in_place(ctx, origin, |img| {
             img.width_px = width as u32;

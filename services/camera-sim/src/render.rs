@@ -60,6 +60,8 @@ pub struct Renderer {
     /// Signal above (or, for hulls, below) the background, DN; zero outside `dirty`.
     signal: Vec<f32>,
     dirty: Vec<Rect>,
+    /// Scratch: the occluding hulls of one frame (vehicle, axis ends).
+    capsules: Vec<(usize, Point3<f64>, Point3<f64>)>,
     /// Scratch: the separable Gaussian weights of one patch.
     gu: Vec<f64>,
     gv: Vec<f64>,
@@ -114,6 +116,7 @@ impl Renderer {
             z,
             signal: vec![0.0; width * height],
             dirty: Vec::with_capacity(64),
+            capsules: Vec::with_capacity(ipc_types::MAX_VEHICLES),
             gu: vec![0.0; 2 * MAX_PATCH_RADIUS as usize + 1],
             gv: vec![0.0; 2 * MAX_PATCH_RADIUS as usize + 1],
             cos_half: half.cos(),
@@ -183,21 +186,25 @@ impl Renderer {
         }
         // 2. Lamps: every vehicle's (the target's and the distractors').
         let half_len = 0.5 * self.hull.length_m;
-        let capsules: Vec<(usize, Point3<f64>, Point3<f64>)> = vehicles
-            .iter()
-            .enumerate()
-            .filter(|(i, p)| {
-                *i != own
-                    && (p.translation.vector - centre.coords).norm() < reach + self.hull.length_m
-            })
-            .map(|(i, p)| {
-                (
-                    i,
-                    p * Point3::new(half_len, 0.0, 0.0),
-                    p * Point3::new(-half_len, 0.0, 0.0),
-                )
-            })
-            .collect();
+        let mut capsules = std::mem::take(&mut self.capsules);
+        capsules.clear();
+        capsules.extend(
+            vehicles
+                .iter()
+                .enumerate()
+                .filter(|(i, p)| {
+                    *i != own
+                        && (p.translation.vector - centre.coords).norm()
+                            < reach + self.hull.length_m
+                })
+                .map(|(i, p)| {
+                    (
+                        i,
+                        p * Point3::new(half_len, 0.0, 0.0),
+                        p * Point3::new(-half_len, 0.0, 0.0),
+                    )
+                }),
+        );
         let r2 = self.hull.radius_m * self.hull.radius_m;
         for (i, pose) in vehicles.iter().enumerate() {
             if i == own {
@@ -239,6 +246,7 @@ impl Renderer {
                 }
             }
         }
+        self.capsules = capsules;
         // 3. The frame: background with noise, then the signal's pixels.
         stats.saturated = self.compose(seed, out);
         stats

@@ -29,14 +29,6 @@ pub fn world_pose(v: &ipc_types::VehiclePose) -> Isometry3<f64> {
     pose(v.position_ned_m, v.q_body_to_ned_wxyz)
 }
 
-/// Every vehicle's pose in a world snapshot, into `out` (cleared first):
-/// what a sensor simulator keeps of the snapshot, read where it lies.
-pub fn world_poses(w: &ipc_types::World, out: &mut Vec<Isometry3<f64>>) {
-    out.clear();
-    let n = (w.count as usize).min(w.vehicles.len());
-    out.extend(w.vehicles[..n].iter().map(world_pose));
-}
-
 /// A seed for one random stream of one process: deterministic in the
 /// scenario seed, the vehicle index and the stream id (splitmix64).
 pub fn seed_for(scenario_seed: u64, vehicle_index: usize, stream: u64) -> u64 {

@@ -36,6 +36,7 @@ pub mod domain;
 pub mod latency;
 pub mod ports;
 pub mod stats;
+pub mod world;
 
 use std::time::Duration;
 
@@ -49,6 +50,7 @@ pub use domain::{
 };
 pub use latency::LatencyRecorder;
 pub use ports::{Publisher, Subscriber};
+pub use world::WorldView;
 
 /// How time advances in a run.
 #[derive(

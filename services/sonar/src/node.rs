@@ -1,13 +1,12 @@
 //! Wiring of the sonar library to its channels.
 
 use anyhow::Context;
-use ipc_types::{Channel, RunChannel, Sample, World};
+use ipc_types::{Channel, RunChannel, Sample};
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use shoal_runtime::convert::{seed_for, world_poses};
-use shoal_runtime::ports::Origin;
-use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use shoal_runtime::convert::seed_for;
+use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Task, TaskError, WorldView};
 use shoal_scenario::Scenario;
 use sonar::{Obstacle, ObstacleField, Sonar, SonarConfig};
 
@@ -16,12 +15,8 @@ pub struct SonarTask {
     field: ObstacleField,
     index: usize,
     rng: ChaCha8Rng,
-    world_in: Subscriber<World>,
+    world: WorldView,
     out: Publisher<ipc_types::Sonar>,
-    /// Every vehicle's pose in the newest world snapshot, read in place.
-    poses: Vec<Isometry3<f64>>,
-    /// The snapshot's origin; `None` until the first one.
-    world_origin: Option<Origin>,
     others: Vec<Isometry3<f64>>,
 }
 
@@ -39,17 +34,15 @@ impl SonarTask {
             field: ObstacleField::new(&obstacles)?,
             index,
             rng: ChaCha8Rng::seed_from_u64(seed_for(scenario.seed, index, 2)),
-            world_in: rt.subscriber(
+            world: WorldView::new(rt.subscriber(
                 &ipc_types::run_service_name(run, RunChannel::World),
                 &ChannelLimits::world(scenario.vehicles.len()),
                 2,
-            )?,
+            )?),
             out: rt.publisher(
                 &ipc_types::service_name(run, me, Channel::Sonar),
                 &ChannelLimits::vehicle(),
             )?,
-            poses: Vec::with_capacity(scenario.vehicles.len()),
-            world_origin: None,
             others: Vec::with_capacity(scenario.vehicles.len()),
         })
     }
@@ -57,19 +50,12 @@ impl SonarTask {
 
 impl Task for SonarTask {
     fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
-        let poses = &mut self.poses;
-        let fresh = self.world_in.with_latest_in_place(ctx, |w| {
-            world_poses(w, poses);
-            Origin::of(&w.header)
-        })?;
-        if fresh.is_some() {
-            self.world_origin = fresh;
-        }
-        let (Some(origin), Some(&pose)) = (self.world_origin, self.poses.get(self.index)) else {
+        let origin = self.world.refresh(ctx)?;
+        let (Some(origin), Some(&pose)) = (origin, self.world.poses().get(self.index)) else {
             return Ok(());
         };
         self.others.clear();
-        for (i, v) in self.poses.iter().enumerate() {
+        for (i, v) in self.world.poses().iter().enumerate() {
             if i != self.index {
                 self.others.push(*v);
             }
