@@ -10,6 +10,7 @@
 //! | [`cli`] | what the user typed: one file per command, clap arguments and printing only |
 //! | [`preflight`] | may this scenario run here: load, resolve (D_a/D_b), advice, resources against the machine's limits |
 //! | [`launch`] | how a run is driven: processes, lockstep and realtime, supervision and restart, the OS calls |
+//! | [`hosts`] | a run spread over hosts on Zenoh: agents, placement, bridges, the coordinator |
 //! | [`analysis`] | what the run did: trajectories, slot error, passage, the typed `summary.json`, compare |
 //! | [`plots`] | the figures of a run and of a comparison |
 //! | [`export`] | the recording for other viewers (Foxglove) |
@@ -25,6 +26,7 @@ pub mod campaign;
 pub mod cli;
 pub mod export;
 pub mod gen;
+pub mod hosts;
 pub mod launch;
 pub mod pipeline;
 pub mod plots;

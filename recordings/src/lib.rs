@@ -30,7 +30,7 @@ mod writer;
 
 pub use diff::first_field_difference;
 pub use reader::{ChannelStats, InspectReport, Recording, RecordingError, StoredMessage};
-pub use recover::{merge, recover, RecoverError, RecoverReport};
+pub use recover::{join_hosts, merge, recover, RecoverError, RecoverReport};
 pub use registry::{all_types, type_info_by_schema, TypeInfo};
 pub use writer::{Compression, RecordingWriter, WriterError, WriterOptions, CDR_HEADER};
 

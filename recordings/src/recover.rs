@@ -108,6 +108,44 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
 /// (the first). The report's byte counts add up over the inputs; its
 /// `input` names them joined by ` + `.
 pub fn merge(inputs: &[&Path], output: &Path) -> Result<RecoverReport, RecoverError> {
+    join(inputs, output, Join::Restarts)
+}
+
+/// Joins recordings written side by side (one recorder per host of a run
+/// spread over hosts, each recording what its host's processes publish)
+/// into one complete MCAP file at `output`, messages in log-time order
+/// (ties: input order, then the input's own order). Nothing is taken for a
+/// duplicate: two hosts' `/stats` samples may share a time and sequence.
+/// Metadata records are kept once per name (the first), except the
+/// recorders' counts (`shoal.recorder`: messages, dropped, rejected), which
+/// add up over the inputs, and the hosts, which `shoal.run` lists
+/// (`hosts`, comma-separated, in input order).
+pub fn join_hosts(inputs: &[&Path], output: &Path) -> Result<RecoverReport, RecoverError> {
+    join(inputs, output, Join::Hosts)
+}
+
+/// How inputs are joined.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Join {
+    /// One after the other in time; repeats dropped.
+    Restarts,
+    /// Side by side; interleaved by time; counts added.
+    Hosts,
+}
+
+/// A message held until every input has been read (joining hosts).
+struct Held {
+    log_time: u64,
+    input: usize,
+    order: usize,
+    header: mcap::records::MessageHeader,
+    data: Vec<u8>,
+}
+
+/// The recorder counts that add up over hosts.
+const SUMMED: [&str; 3] = ["messages", "dropped", "rejected"];
+
+fn join(inputs: &[&Path], output: &Path, how: Join) -> Result<RecoverReport, RecoverError> {
     if output.exists() {
         return Err(RecoverError::Exists(output.to_path_buf()));
     }
@@ -130,7 +168,7 @@ pub fn merge(inputs: &[&Path], output: &Path) -> Result<RecoverReport, RecoverEr
             path: tmp.clone(),
             source,
         })?;
-    let result = copy(&all, file, output).and_then(|mut report| {
+    let result = copy(&all, file, output, how).and_then(|mut report| {
         report.output_bytes = verify(&tmp, &report)?;
         // Hard link then unlink: fails rather than replace an output that
         // appeared meanwhile.
@@ -156,6 +194,7 @@ fn copy(
     inputs: &[(PathBuf, Vec<u8>)],
     file: File,
     output: &Path,
+    how: Join,
 ) -> Result<RecoverReport, RecoverError> {
     // First pass over the first input: the profile and compression go in
     // the copy's header and options.
@@ -224,7 +263,11 @@ fn copy(
     let mut schema_names: HashMap<u16, String> = HashMap::new();
     let mut topics: std::collections::BTreeMap<u16, rosbag2::Topic> = Default::default();
     let mut span: Option<(u64, u64)> = None;
-    for (path, bytes) in inputs {
+    // Joining hosts: every message, and the metadata, until the end.
+    let mut held: Vec<Held> = Vec::new();
+    let mut held_metadata: Vec<(String, std::collections::BTreeMap<String, String>)> = Vec::new();
+    let mut hosts: Vec<String> = Vec::new();
+    for (input, (path, bytes)) in inputs.iter().enumerate() {
         let mut schema_ids: HashMap<u16, u16> = HashMap::new();
         let mut channel_ids: HashMap<u16, u16> = HashMap::new();
         let mut written_now: HashMap<u16, (u64, u32)> = HashMap::new();
@@ -294,18 +337,26 @@ fn copy(
                         // A message of a channel never declared cannot be written.
                         if let Some(&id) = channel_ids.get(&m.channel_id) {
                             let key = (m.log_time, m.sequence);
-                            if written_before.get(&id).is_some_and(|last| key <= *last) {
-                                return Ok(());
-                            }
-                            writer.write_to_known_channel(
-                                &mcap::records::MessageHeader {
-                                    channel_id: id,
-                                    sequence: m.sequence,
+                            let header = mcap::records::MessageHeader {
+                                channel_id: id,
+                                sequence: m.sequence,
+                                log_time: m.log_time,
+                                publish_time: m.publish_time,
+                            };
+                            if how == Join::Hosts {
+                                held.push(Held {
                                     log_time: m.log_time,
-                                    publish_time: m.publish_time,
-                                },
-                                &m.data,
-                            )?;
+                                    input,
+                                    order: held.len(),
+                                    header,
+                                    data: m.data,
+                                });
+                            } else {
+                                if written_before.get(&id).is_some_and(|last| key <= *last) {
+                                    return Ok(());
+                                }
+                                writer.write_to_known_channel(&header, &m.data)?;
+                            }
                             let last = written_now.entry(id).or_insert(key);
                             *last = (*last).max(key);
                             report.messages += 1;
@@ -321,6 +372,25 @@ fn copy(
                     Item::Metadata { name, values } => {
                         // An input's rosbag2 record counts that input only.
                         if name == rosbag2::RECORD_NAME {
+                            return Ok(());
+                        }
+                        if how == Join::Hosts {
+                            if name == "shoal.run" {
+                                hosts.extend(values.get("host").cloned());
+                            }
+                            match held_metadata.iter_mut().find(|(n, _)| *n == name) {
+                                Some((_, kept)) if name == "shoal.recorder" => {
+                                    for k in SUMMED {
+                                        let add = |v: Option<&String>| {
+                                            v.and_then(|v| v.parse::<u64>().ok()).unwrap_or(0)
+                                        };
+                                        let sum = add(kept.get(k)) + add(values.get(k));
+                                        kept.insert(k.to_string(), sum.to_string());
+                                    }
+                                }
+                                Some(_) => {}
+                                None => held_metadata.push((name, values)),
+                            }
                             return Ok(());
                         }
                         if metadata_names.insert(name.clone()) {
@@ -361,6 +431,23 @@ fn copy(
             });
         }
         report.chunks += end.chunks;
+    }
+    if how == Join::Hosts {
+        held.sort_unstable_by_key(|h| (h.log_time, h.input, h.order));
+        for h in &held {
+            writer.write_to_known_channel(&h.header, &h.data)?;
+        }
+        for (name, mut values) in held_metadata {
+            if name == "shoal.run" && !hosts.is_empty() {
+                values.remove("host");
+                values.insert("hosts".to_string(), hosts.join(","));
+            }
+            writer.write_metadata(&mcap::records::Metadata {
+                name,
+                metadata: values,
+            })?;
+            report.metadata += 1;
+        }
     }
     if ros2 {
         let (start, end) = span.unwrap_or((0, 0));

@@ -1,13 +1,19 @@
-//! `shoal check`: validate and resolve a scenario, print the formation.
+//! `shoal check`: validate and resolve a scenario, print the formation,
+//! and with `--hosts` its placement and what crosses hosts.
 
 use std::path::PathBuf;
 
+use crate::hosts::{HostsFile, Placement};
 use crate::preflight;
+
+/// Framing a Zenoh message adds on a link, bytes (a frame header with the
+/// key as a declared id; TCP/IP headers are shared by a batch).
+const ZENOH_OVERHEAD: usize = 16;
 
 /// Resolves the scenario at `path` (default: the paper's) and prints each
 /// follower's slot and D_a/D_b, with any advice; with `resolved`, the
-/// effective scenario as TOML instead.
-pub fn run(path: Option<PathBuf>, resolved: bool) -> anyhow::Result<()> {
+/// effective scenario as TOML instead; with `hosts`, the placement.
+pub fn run(path: Option<PathBuf>, resolved: bool, hosts: Option<PathBuf>) -> anyhow::Result<()> {
     let mut s = preflight::load_scenario(&path)?;
     preflight::resolve(&mut s)?;
     if resolved {
@@ -31,6 +37,69 @@ pub fn run(path: Option<PathBuf>, resolved: bool) -> anyhow::Result<()> {
             v.slot_m.unwrap_or_default(),
             v.d_a_m.unwrap_or(0.0),
             v.d_b_m.unwrap_or(0.0)
+        );
+    }
+    if let Some(path) = hosts {
+        print_placement(&s, &HostsFile::load(&path)?)?;
+    }
+    Ok(())
+}
+
+/// The placement of `s` on `file`'s hosts, the crossings and the links.
+fn print_placement(s: &shoal_scenario::Scenario, file: &HostsFile) -> anyhow::Result<()> {
+    let p = Placement::new(file, s)?;
+    let procs = s.processes();
+    println!("placement on {} host(s):", p.len());
+    for h in 0..p.len() {
+        let n = procs.iter().filter(|x| p.runs(s, h, x)).count();
+        let vehicles = p.vehicles_on(s, h);
+        println!(
+            "  {:<10} {:<28} {:>4} processes{}  vehicles: {}",
+            p.hosts[h],
+            p.endpoints[h],
+            n,
+            if p.world_host == h { " (world)" } else { "" },
+            if vehicles.is_empty() {
+                "-".to_string()
+            } else {
+                vehicles.join(" ")
+            }
+        );
+    }
+    let crossings = p.crossings(s, "RUN");
+    let sample_rate: f64 = crossings
+        .iter()
+        .map(|c| c.rate_hz * c.to.len() as f64)
+        .sum();
+    println!(
+        "crossing hosts: {} service(s), {:.0} samples per simulated second delivered",
+        crossings.len(),
+        sample_rate
+    );
+    for c in &crossings {
+        let to: Vec<&str> = c.to.iter().map(|&t| p.hosts[t].as_str()).collect();
+        println!(
+            "  {:<6} {:<8} {} -> {}  {} B at {:.0} Hz",
+            c.what,
+            c.vehicle,
+            p.hosts[c.from],
+            to.join(","),
+            c.sample_bytes,
+            c.rate_hz
+        );
+    }
+    println!(
+        "links to the coordinator, per simulated second ({ZENOH_OVERHEAD} B framing per message; {:.0} lockstep ticks/s):",
+        crate::hosts::placement::lockstep_ticks_per_sim_s(s)
+    );
+    for (h, (up, down)) in p.link_load(s, "RUN", ZENOH_OVERHEAD).iter().enumerate() {
+        println!(
+            "  {:<10} up {:>9.1} kB/s ({:>6.0} msg/s)   down {:>9.1} kB/s ({:>6.0} msg/s)",
+            p.hosts[h],
+            up.bytes_per_s / 1e3,
+            up.messages_per_s,
+            down.bytes_per_s / 1e3,
+            down.messages_per_s
         );
     }
     Ok(())

@@ -9,6 +9,7 @@ mod check;
 mod compare;
 mod export;
 mod gen;
+mod host;
 mod inspect;
 mod recover;
 mod replay;
@@ -64,6 +65,11 @@ enum Cmd {
         /// keeps as `shoal.run` / `effective_toml`).
         #[arg(long)]
         resolved: bool,
+        /// Also place the group on the hosts of this file (as `shoal run
+        /// --hosts` would) and print what crosses hosts and the bandwidth
+        /// each link needs.
+        #[arg(long)]
+        hosts: Option<PathBuf>,
     },
     /// Run the method, the paper's method as published, the acoustic-modem
     /// baseline and the no-vertical-shift ablation side by side; write
@@ -95,6 +101,10 @@ enum Cmd {
     /// recorded inputs and report the first output that differs (exit
     /// status 3 when one does).
     Replay(replay::ReplayCmd),
+    /// Serve as one host of runs spread over several (`shoal run --hosts`):
+    /// start and reap this host's processes, bridge what crosses hosts onto
+    /// Zenoh, follow the coordinator's lockstep clock.
+    Host(host::HostCmd),
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(BenchCmd),
@@ -125,7 +135,12 @@ pub fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.cmd {
         Cmd::Run(cmd) => run::run(cmd),
-        Cmd::Check { scenario, resolved } => check::run(scenario, resolved),
+        Cmd::Check {
+            scenario,
+            resolved,
+            hosts,
+        } => check::run(scenario, resolved, hosts),
+        Cmd::Host(cmd) => host::run(cmd),
         Cmd::Inspect {
             recording,
             json,
@@ -214,6 +229,7 @@ mod tests {
             "export",
             "recover",
             "replay",
+            "host",
             "bench",
         ] {
             assert!(help.contains(&format!("  {name}")), "{name}: {help}");

@@ -41,6 +41,11 @@ pub struct RunCmd {
     /// with a spare core per busy process).
     #[arg(long, default_value_t = 0)]
     spin_us: u64,
+    /// Spread the run over the hosts of this file (TOML: `[[host]]` with
+    /// `name`, `endpoint` and optional `vehicles`; `[placement] world`),
+    /// each running `shoal host`. Lockstep only.
+    #[arg(long)]
+    hosts: Option<PathBuf>,
 }
 
 /// Where the service binaries are and how long a tick may take: the options
@@ -78,6 +83,12 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
         .unwrap_or_else(|| launch::default_out(&scenario));
     let mut settings = cmd.processes.settings(cmd.mode, cmd.quiet)?;
     settings.spin_us = cmd.spin_us;
+    if let Some(path) = &cmd.hosts {
+        let file = crate::hosts::HostsFile::load(path)?;
+        // Refused here, before anything starts, if it cannot place the group.
+        crate::hosts::Placement::new(&file, &scenario)?;
+        settings.hosts = Some(file);
+    }
     if cmd.force {
         pipeline::clear_outputs(&out)?;
     }

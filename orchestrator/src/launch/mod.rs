@@ -42,6 +42,8 @@ pub struct RunOptions {
     /// Adaptive wait budget of every process (and of the orchestrator's wait
     /// for `done`), µs; 0 = block at once.
     pub spin_us: u64,
+    /// Spread the run over these hosts (`shoal run --hosts`); `None`: here.
+    pub hosts: Option<crate::hosts::HostsFile>,
 }
 
 /// What a run produced.
@@ -103,7 +105,8 @@ pub(crate) struct Ports {
     pub(crate) node: Node<ipc::Service>,
     pub(crate) clock: Publisher<Clock>,
     pub(crate) done: Listener<ipc::Service>,
-    pub(crate) wakes: Vec<Notifier<ipc::Service>>,
+    /// Wake events by process index; `None` for a process another host runs.
+    pub(crate) wakes: Vec<Option<Notifier<ipc::Service>>>,
     /// Sequence number of the next clock sample.
     clock_seq: u64,
     /// The run's events.
@@ -113,8 +116,18 @@ pub(crate) struct Ports {
 }
 
 impl Ports {
-    /// Opens the ports of a run whose processes are `procs`.
+    /// Opens the ports of a run whose processes are `procs`, all run here.
     pub(crate) fn open(run_id: &str, procs: &[ProcessSpec]) -> anyhow::Result<Self> {
+        Self::open_local(run_id, procs, |_| true)
+    }
+
+    /// Opens the ports of a run whose processes are `procs`, of which this
+    /// host runs those for which `local` holds (it wakes only those).
+    pub(crate) fn open_local(
+        run_id: &str,
+        procs: &[ProcessSpec],
+        local: impl Fn(&ProcessSpec) -> bool,
+    ) -> anyhow::Result<Self> {
         let node = shoal_runtime::domain_node(run_id, "run/orchestrator")?;
         let clock = shoal_runtime::node_publisher::<Clock, _>(
             &node,
@@ -127,11 +140,15 @@ impl Ports {
             .context("done listener")?;
         let mut wakes = Vec::with_capacity(procs.len());
         for p in procs {
+            if !local(p) {
+                wakes.push(None);
+                continue;
+            }
             let n = shoal_runtime::open_wake(&node, run_id, &p.vehicle, p.kind.name())?
                 .notifier_builder()
                 .create()
                 .with_context(|| format!("wake notifier of {}", p.label()))?;
-            wakes.push(n);
+            wakes.push(Some(n));
         }
         let journal = Journal::open(&node, run_id)?;
         Ok(Self {
@@ -171,16 +188,28 @@ impl Ports {
         self.clock_seq += 1;
         self.clock.publish_stamped(clock)?;
         for &i in due {
-            self.wakes[i]
-                .notify()
-                .with_context(|| format!("wake {}", procs[i].label()))?;
+            self.wake(i, procs)?;
         }
+        Ok(())
+    }
+
+    /// Wakes process `i` (a process of this host).
+    pub(crate) fn wake(&self, i: usize, procs: &[ProcessSpec]) -> anyhow::Result<()> {
+        self.wakes
+            .get(i)
+            .and_then(Option::as_ref)
+            .with_context(|| format!("{} does not run on this host", procs[i].label()))?
+            .notify()
+            .with_context(|| format!("wake {}", procs[i].label()))?;
         Ok(())
     }
 }
 
 /// Runs a scenario to the end and leaves the recording in `opts.out`.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
+    if let Some(hosts) = &opts.hosts {
+        return crate::hosts::coordinator::run(opts, hosts);
+    }
     let scenario = &opts.scenario;
     std::fs::create_dir_all(opts.out.join("logs"))
         .with_context(|| format!("cannot create {}", opts.out.display()))?;
@@ -232,6 +261,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         spin_us: opts.spin_us,
         scenario_path: scenario_path.clone(),
         scenario: scenario.clone(),
+        scope: None,
     };
     let effective = launch.effective_scenario();
     std::fs::write(&effective, crate::preflight::effective_toml(scenario)?)
@@ -289,26 +319,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
 
     let (wall_time_s, ticks) = result?;
     joined?;
-    let mut cpu_time_s: BTreeMap<String, f64> = BTreeMap::new();
-    let mut max_rss_kib: BTreeMap<String, i64> = BTreeMap::new();
-    for c in sup.children() {
-        let name = c.spec.kind.name().to_string();
-        if let Some(e) = c.exit {
-            *cpu_time_s.entry(name.clone()).or_default() += e.cpu_s;
-            let m = max_rss_kib.entry(name).or_default();
-            *m = (*m).max(e.max_rss_kib);
-        }
-    }
-    // A process's own peak (its exit file) where it wrote one: wait4's counts
-    // the orchestrator's pages a child holds between fork and exec.
-    let mut own_peak: BTreeMap<String, i64> = BTreeMap::new();
-    for f in &stats {
-        if let Some(k) = f.peak_rss_kib.and_then(|k| i64::try_from(k).ok()) {
-            let m = own_peak.entry(f.process.clone()).or_default();
-            *m = (*m).max(k);
-        }
-    }
-    max_rss_kib.extend(own_peak);
+    let (mut cpu_time_s, max_rss_kib) = usage_by_kind(&child_usage(&sup), &stats);
     cpu_time_s.insert("orchestrator".into(), sys::self_cpu_s());
     let failed: Vec<String> = sup
         .latest()
@@ -341,10 +352,61 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     })
 }
 
+/// What one reaped process used: its kind, CPU time and peak RSS.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ProcessUsage {
+    /// Process kind (`sim-plant`, ...).
+    pub kind: String,
+    /// User + system CPU time, s.
+    pub cpu_s: f64,
+    /// Peak RSS as `wait4` counts it, KiB.
+    pub max_rss_kib: i64,
+}
+
+/// The usage of every child `sup` has reaped.
+pub(crate) fn child_usage(sup: &Supervisor) -> Vec<ProcessUsage> {
+    sup.children()
+        .iter()
+        .filter_map(|c| {
+            c.exit.map(|e| ProcessUsage {
+                kind: c.spec.kind.name().to_string(),
+                cpu_s: e.cpu_s,
+                max_rss_kib: e.max_rss_kib,
+            })
+        })
+        .collect()
+}
+
+/// CPU time summed and peak RSS (largest single process) by process kind.
+/// A process's own peak (its exit file) replaces `wait4`'s where it wrote
+/// one: `wait4`'s counts the orchestrator's pages a child holds between
+/// fork and exec.
+pub(crate) fn usage_by_kind(
+    usage: &[ProcessUsage],
+    stats: &[shoal_runtime::stats::StatsFile],
+) -> (BTreeMap<String, f64>, BTreeMap<String, i64>) {
+    let mut cpu_time_s: BTreeMap<String, f64> = BTreeMap::new();
+    let mut max_rss_kib: BTreeMap<String, i64> = BTreeMap::new();
+    for u in usage {
+        *cpu_time_s.entry(u.kind.clone()).or_default() += u.cpu_s;
+        let m = max_rss_kib.entry(u.kind.clone()).or_default();
+        *m = (*m).max(u.max_rss_kib);
+    }
+    let mut own_peak: BTreeMap<String, i64> = BTreeMap::new();
+    for f in stats {
+        if let Some(k) = f.peak_rss_kib.and_then(|k| i64::try_from(k).ok()) {
+            let m = own_peak.entry(f.process.clone()).or_default();
+            *m = (*m).max(k);
+        }
+    }
+    max_rss_kib.extend(own_peak);
+    (cpu_time_s, max_rss_kib)
+}
+
 /// Joins the first recording and those of restarted recorders (`parts`, in
 /// order) into `recording`; the parts are removed once the joined file has
 /// been read back whole.
-fn join_recordings(recording: &Path, parts: &[PathBuf]) -> anyhow::Result<()> {
+pub(crate) fn join_recordings(recording: &Path, parts: &[PathBuf]) -> anyhow::Result<()> {
     let mut inputs: Vec<&Path> = vec![recording];
     inputs.extend(parts.iter().map(PathBuf::as_path).filter(|p| p.is_file()));
     let joined = recording.with_extension("joined.mcap");
@@ -381,16 +443,7 @@ fn lockstep(
     );
     let start = Instant::now();
     let mut due: Vec<usize> = Vec::with_capacity(procs.len());
-    // Kills and stalls, by the tick at which they strike.
-    let mut injections: Vec<(u64, &shoal_scenario::faults::Fault)> = scenario
-        .faults
-        .iter()
-        .filter_map(|f| {
-            let at = f.at_s?;
-            Some(((at / scenario.rates.tick_s).ceil() as u64, f))
-        })
-        .collect();
-    injections.sort_by_key(|(t, _)| *t);
+    let injections = injections(scenario);
     let mut next_injection = 0;
     for tick in 0..ticks {
         let sim = tick * tick_ns;
@@ -428,8 +481,22 @@ fn lockstep(
     Ok((start.elapsed().as_secs_f64(), ticks))
 }
 
+/// The scenario's kills and stalls, by the tick at which they strike.
+pub(crate) fn injections(scenario: &Scenario) -> Vec<(u64, &shoal_scenario::faults::Fault)> {
+    let mut injections: Vec<(u64, &shoal_scenario::faults::Fault)> = scenario
+        .faults
+        .iter()
+        .filter_map(|f| {
+            let at = f.at_s?;
+            Some(((at / scenario.rates.tick_s).ceil() as u64, f))
+        })
+        .collect();
+    injections.sort_by_key(|(t, _)| *t);
+    injections
+}
+
 /// Strikes a kill or stall fault (scenario `[[faults]]`) at simulation time `sim_ns`.
-fn inject(
+pub(crate) fn inject(
     fault: &shoal_scenario::faults::Fault,
     procs: &[ProcessSpec],
     sup: &mut Supervisor,
@@ -644,9 +711,7 @@ pub(crate) fn wait_done(
             {
                 // Its clock subscriber gets the tick in progress, then the wake-up.
                 ports.clock.update_connections()?;
-                ports.wakes[i]
-                    .notify()
-                    .with_context(|| format!("wake {}", procs[i].label()))?;
+                ports.wake(i, procs)?;
             }
         }
         if t.remaining == 0 && !ports.recovery.any_awaiting() {
@@ -700,7 +765,7 @@ pub(crate) fn wait_done(
 
 /// SIGINT/SIGTERM received by the orchestrator (iceoryx2 installs the
 /// handler when the orchestrator's node is created).
-fn termination_requested() -> Option<&'static str> {
+pub(crate) fn termination_requested() -> Option<&'static str> {
     use iceoryx2_bb_posix::signal::{NonFatalFetchableSignal, SignalHandler};
     match SignalHandler::last_signal() {
         Some(NonFatalFetchableSignal::Interrupt) => Some("SIGINT"),

@@ -40,6 +40,31 @@ pub(crate) struct Launch {
     pub(crate) spin_us: u64,
     pub(crate) scenario_path: PathBuf,
     pub(crate) scenario: Scenario,
+    /// The share of a run spread over hosts that this host runs; `None`:
+    /// the whole run.
+    pub(crate) scope: Option<HostScope>,
+}
+
+/// What one host of a run spread over hosts runs and records.
+#[derive(Debug, Clone)]
+pub(crate) struct HostScope {
+    /// The host's name.
+    pub(crate) host: String,
+    /// By process index: true for the processes this host runs.
+    pub(crate) local: Vec<bool>,
+    /// The vehicles placed here (its recorder records their channels).
+    pub(crate) vehicles: Vec<String>,
+    /// True if the world runs here (its recorder records `/world`).
+    pub(crate) world: bool,
+}
+
+impl Launch {
+    /// True if this host runs `p`.
+    pub(crate) fn is_local(&self, p: &ProcessSpec) -> bool {
+        self.scope
+            .as_ref()
+            .is_none_or(|s| s.local.get(p.index).copied().unwrap_or(false))
+    }
 }
 
 impl Launch {
@@ -50,9 +75,14 @@ impl Launch {
 
     /// The log file of `p` (every incarnation writes to the same one).
     pub(crate) fn log(&self, p: &ProcessSpec) -> PathBuf {
-        self.out
-            .join("logs")
-            .join(format!("{}.{}.log", p.vehicle, p.kind.name()))
+        let name = match &self.scope {
+            // Every host runs a recorder: its log names the host.
+            Some(scope) if p.kind == ProcessKind::Recorder => {
+                format!("{}.{}.{}.log", p.vehicle, p.kind.name(), scope.host)
+            }
+            _ => format!("{}.{}.log", p.vehicle, p.kind.name()),
+        };
+        self.out.join("logs").join(name)
     }
 
     /// The scenario as every process runs it, defaults filled in
@@ -111,6 +141,14 @@ impl Launch {
             args.push(self.recording(restart).display().to_string());
             args.push("--effective".into());
             args.push(self.effective_scenario().display().to_string());
+            if let Some(scope) = &self.scope {
+                args.push("--host".into());
+                args.push(scope.host.clone());
+                args.push(format!("--vehicles={}", scope.vehicles.join(",")));
+                if !scope.world {
+                    args.push("--no-world".into());
+                }
+            }
         }
         args
     }
@@ -260,7 +298,10 @@ impl Recovery {
         r.max_restarts = sup.max_restarts;
         r.restart_timeout = Duration::from_secs_f64(sup.restart_timeout_s);
         if r.policy == Policy::Restart {
-            for p in procs.iter().filter(|p| p.kind == ProcessKind::SimPlant) {
+            for p in procs
+                .iter()
+                .filter(|p| p.kind == ProcessKind::SimPlant && launch.is_local(p))
+            {
                 let sub = shoal_runtime::node_subscriber::<Truth, _>(
                     node,
                     &ipc_types::service_name(&launch.run_id, &p.vehicle, ipc_types::Channel::Truth),

@@ -23,6 +23,8 @@ pub struct RunSettings {
     pub tick_timeout: Duration,
     /// Adaptive wait budget of every process, µs; 0 = block at once.
     pub spin_us: u64,
+    /// Spread runs over these hosts; `None`: run here.
+    pub hosts: Option<crate::hosts::HostsFile>,
 }
 
 /// Where the service binaries are: `bin_dir`, else the directory of the
@@ -54,6 +56,7 @@ impl RunSettings {
             progress: !quiet,
             tick_timeout: Duration::from_secs_f64(tick_timeout.max(0.1)),
             spin_us: 0,
+            hosts: None,
         })
     }
 
@@ -67,6 +70,7 @@ impl RunSettings {
             progress: self.progress,
             tick_timeout: self.tick_timeout,
             spin_us: self.spin_us,
+            hosts: self.hosts.clone(),
         }
     }
 }

@@ -413,6 +413,7 @@ pub fn rerun(rec: &Recording, opts: &RerunOptions) -> anyhow::Result<RerunReport
         spin_us: 0,
         scenario_path: scenario_path.clone(),
         scenario: scenario.clone(),
+        scope: None,
     };
     let result = drive(rec, &scenario, &spec, &run_id, &mut ports, &mut sup, || {
         (

@@ -22,6 +22,8 @@ struct Cli {
     /// the recording's `shoal.run` metadata as `effective_toml`.
     #[arg(long)]
     effective: Option<std::path::PathBuf>,
+    #[command(flatten)]
+    scope: node::Scope,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -39,7 +41,7 @@ fn main() -> anyhow::Result<()> {
         as_run: &text,
         effective: effective.as_deref(),
     };
-    let task = node::RecorderTask::new(&rt, &scenario, &texts, &cli.out)?;
+    let task = node::RecorderTask::new(&rt, &scenario, &texts, &cli.scope, &cli.out)?;
     rt.run(task)?;
     Ok(())
 }

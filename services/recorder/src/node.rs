@@ -147,6 +147,30 @@ fn open_tap<T: Sample>(
     Ok(Box::new(TypedTap { sub, channel }))
 }
 
+/// What one recorder records: everything, or (a run spread over hosts)
+/// what the processes of its own host publish.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct Scope {
+    /// Record only these vehicles' channels (comma-separated; given with no
+    /// value: none), the vehicles of this recorder's host.
+    #[arg(long, value_delimiter = ',', num_args = 0..)]
+    pub vehicles: Option<Vec<String>>,
+    /// Do not record the world snapshot (another host runs the world).
+    #[arg(long)]
+    pub no_world: bool,
+    /// The host this recorder runs on, kept in the recording's metadata.
+    #[arg(long)]
+    pub host: Option<String>,
+}
+
+impl Scope {
+    fn records(&self, vehicle: &str) -> bool {
+        self.vehicles
+            .as_ref()
+            .is_none_or(|v| v.iter().any(|n| n == vehicle))
+    }
+}
+
 /// The scenario texts the recording keeps in its `shoal.run` metadata.
 pub struct ScenarioTexts<'a> {
     /// The scenario as the run was given it, resolved (`scenario_toml`).
@@ -160,6 +184,7 @@ impl RecorderTask {
         rt: &Runtime,
         scenario: &Scenario,
         texts: &ScenarioTexts<'_>,
+        scope: &Scope,
         out: &Path,
     ) -> anyhow::Result<Self> {
         let opts = WriterOptions {
@@ -194,20 +219,25 @@ impl RecorderTask {
         );
         meta.insert("vehicles".to_string(), scenario.vehicles.len().to_string());
         meta.insert("run_id".to_string(), rt.args().run_id.clone());
+        if let Some(h) = &scope.host {
+            meta.insert("host".to_string(), h.clone());
+        }
         writer.metadata("shoal.run", meta)?;
 
         let run = rt.args().run_id.clone();
         let buffer = scenario.recording.buffer;
         let vlimits = ChannelLimits::vehicle();
         let mut taps: Vec<Box<dyn Tap>> = Vec::new();
-        taps.push(open_tap::<ipc_types::World>(
-            rt,
-            &mut writer,
-            &ipc_types::run_service_name(&run, RunChannel::World),
-            "/world",
-            &ChannelLimits::world(scenario.vehicles.len()),
-            buffer.min(4),
-        )?);
+        if !scope.no_world {
+            taps.push(open_tap::<ipc_types::World>(
+                rt,
+                &mut writer,
+                &ipc_types::run_service_name(&run, RunChannel::World),
+                "/world",
+                &ChannelLimits::world(scenario.vehicles.len()),
+                buffer.min(4),
+            )?);
+        }
         taps.push(open_tap::<ipc_types::ProcessStats>(
             rt,
             &mut writer,
@@ -224,7 +254,8 @@ impl RecorderTask {
             &ChannelLimits::events(),
             shoal_runtime::EVENTS_HISTORY,
         )?);
-        for v in &scenario.vehicles {
+        let recorded = || scenario.vehicles.iter().filter(|v| scope.records(&v.name));
+        for v in recorded() {
             for ch in Channel::ALL {
                 if ch.follower_only() && v.parent.is_none() {
                     continue;
@@ -248,7 +279,7 @@ impl RecorderTask {
             let every = (scenario.rates.camera_hz / camera.record_hz)
                 .round()
                 .max(1.0) as u32;
-            for v in scenario.vehicles.iter().filter(|v| v.parent.is_some()) {
+            for v in recorded().filter(|v| v.parent.is_some()) {
                 let limits = ChannelLimits::image();
                 let sub = rt.subscriber::<ipc_types::Image>(
                     &ipc_types::image_service_name(&run, &v.name),

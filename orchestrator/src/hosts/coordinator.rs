@@ -1,0 +1,546 @@
+//! `shoal run --hosts FILE`: one run spread over the agents of a hosts
+//! file. The coordinator runs no service process itself: it places the
+//! group, hands each agent its share, drives the lockstep clock over Zenoh,
+//! and gathers every host's recording, logs and statistics into the one
+//! output directory a one-host run leaves.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use zenoh::Wait;
+
+use super::placement::{HostsFile, Placement};
+use super::wire::{self, FileChunk, HostOutcome, StartOrder, StartReply};
+use crate::launch::{self, os as sys, RunError, RunOptions, RunOutcome};
+
+/// Longest an agent may take to start its processes, s.
+const START_TIMEOUT: Duration = Duration::from_secs(120);
+/// Longest the agents of a hosts file may take to answer at all.
+const AGENTS_TIMEOUT: Duration = Duration::from_secs(20);
+
+/// What the coordinator's Zenoh callbacks hand its loop.
+#[derive(Debug)]
+enum Heard {
+    Fence(usize, u64),
+    Failed(usize, String),
+    HostGone(String),
+}
+
+/// Why a run over hosts stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum HostsError {
+    /// An agent is not there.
+    #[error("no agent answers as host(s) {missing:?} (expected at {endpoints:?}); agents that answer: {present:?}. Start `shoal host --listen <endpoint> --name <host>` on each")]
+    AgentsMissing {
+        /// Hosts that did not answer.
+        missing: Vec<String>,
+        /// Their endpoints.
+        endpoints: Vec<String>,
+        /// Hosts that did.
+        present: Vec<String>,
+    },
+    /// A host's agent went away during the run.
+    #[error(
+        "host {host} was lost at t = {sim_time_s:.2} s: its agent ended or the link to it is cut"
+    )]
+    HostLost {
+        /// The host.
+        host: String,
+        /// Simulated time, s.
+        sim_time_s: f64,
+    },
+    /// A host's share failed.
+    #[error("host {host} failed at t = {sim_time_s:.2} s: {message}")]
+    HostFailed {
+        /// The host.
+        host: String,
+        /// Simulated time, s.
+        sim_time_s: f64,
+        /// What it said.
+        message: String,
+    },
+    /// Hosts did not fence a tick in time.
+    #[error("no progress for {timeout_s:.0} s at t = {sim_time_s:.2} s: still waiting for host(s) {waiting:?}")]
+    Hung {
+        /// Timeout, s.
+        timeout_s: f64,
+        /// Simulated time, s.
+        sim_time_s: f64,
+        /// Hosts that did not fence.
+        waiting: Vec<String>,
+    },
+}
+
+fn zerr(what: &'static str) -> impl Fn(zenoh::Error) -> anyhow::Error {
+    move |e| anyhow::anyhow!("zenoh {what}: {e}")
+}
+
+/// Runs `opts.scenario` over the hosts of `hosts`.
+pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
+    let scenario = &opts.scenario;
+    anyhow::ensure!(
+        opts.mode == shoal_runtime::Mode::Lockstep,
+        "runs over hosts are lockstep only (realtime over hosts is not built yet)"
+    );
+    let placement = Placement::new(hosts, scenario)?;
+    std::fs::create_dir_all(opts.out.join("logs"))
+        .with_context(|| format!("cannot create {}", opts.out.display()))?;
+    let scenario_toml = scenario.to_toml()?;
+    std::fs::write(opts.out.join("scenario.toml"), &scenario_toml)?;
+    let effective_toml = crate::preflight::effective_toml(scenario)?;
+    std::fs::write(
+        opts.out.join("logs").join("effective-scenario.toml"),
+        &effective_toml,
+    )?;
+    let _ = launch::termination_requested();
+    let run_id = sys::random_id();
+    let session = zenoh::open(wire::coordinator_config(&placement.endpoints)?)
+        .wait()
+        .map_err(zerr("session"))?;
+    await_agents(&session, &placement)?;
+
+    let (tx, rx) = mpsc::channel();
+    let index_of: BTreeMap<String, usize> = placement
+        .hosts
+        .iter()
+        .enumerate()
+        .map(|(i, h)| (h.clone(), i))
+        .collect();
+    let fences = {
+        let tx = tx.clone();
+        let index_of = index_of.clone();
+        session
+            .declare_subscriber(wire::fence(&run_id, "*"))
+            .callback(move |s| {
+                let host = wire::last_chunk(s.key_expr().as_str());
+                if let (Some(&h), Some(t)) = (
+                    index_of.get(host),
+                    wire::decode_tick(&s.payload().to_bytes()),
+                ) {
+                    let _ = tx.send(Heard::Fence(h, t));
+                }
+            })
+            .wait()
+            .map_err(zerr("fence subscriber"))?
+    };
+    let failures = {
+        let tx = tx.clone();
+        let index_of = index_of.clone();
+        session
+            .declare_subscriber(wire::failed(&run_id, "*"))
+            .callback(move |s| {
+                let host = wire::last_chunk(s.key_expr().as_str());
+                if let Some(&h) = index_of.get(host) {
+                    let text = String::from_utf8_lossy(&s.payload().to_bytes()).into_owned();
+                    let _ = tx.send(Heard::Failed(h, text));
+                }
+            })
+            .wait()
+            .map_err(zerr("failure subscriber"))?
+    };
+    let lost = session
+        .liveliness()
+        .declare_subscriber(wire::ALL_ALIVE)
+        .callback(move |s| {
+            if s.kind() == zenoh::sample::SampleKind::Delete {
+                if let Some(h) = wire::host_of_alive(s.key_expr().as_str()) {
+                    let _ = tx.send(Heard::HostGone(h.to_string()));
+                }
+            }
+        })
+        .wait()
+        .map_err(zerr("liveliness subscriber"))?;
+    let _token = session
+        .liveliness()
+        .declare_token(wire::coordinator(&run_id))
+        .wait()
+        .map_err(zerr("liveliness token"))?;
+    let block = zenoh::qos::CongestionControl::Block;
+    let clock = session
+        .declare_publisher(wire::clock(&run_id))
+        .congestion_control(block)
+        .wait()
+        .map_err(zerr("clock publisher"))?;
+    let abort = session
+        .declare_publisher(wire::abort(&run_id))
+        .congestion_control(block)
+        .wait()
+        .map_err(zerr("abort publisher"))?;
+    let run_json = serde_json::json!({
+        "run_id": run_id,
+        "pid": std::process::id(),
+        "mode": opts.mode.as_str(),
+        "hosts": placement.hosts,
+        "endpoints": placement.endpoints,
+        "vehicle_host": placement.vehicle_host,
+        "world_host": placement.world_host,
+    });
+    std::fs::write(
+        opts.out.join("run.json"),
+        serde_json::to_string_pretty(&run_json)?,
+    )?;
+
+    let order = |h: usize| StartOrder {
+        run_id: run_id.clone(),
+        host: h,
+        placement: placement.clone(),
+        scenario_toml: scenario_toml.clone(),
+        effective_toml: effective_toml.clone(),
+        mode: opts.mode,
+        tick_timeout_s: opts.tick_timeout.as_secs_f64(),
+        spin_us: opts.spin_us,
+    };
+    let (started, start_error) = start_all(&session, &placement, order);
+    let mut driven = Driven::default();
+    let result = match start_error {
+        Some(e) => Err(e),
+        None => drive(opts, &placement, &clock, &rx, &mut driven),
+    };
+    if let Err(e) = &result {
+        let _ = abort.put(format!("{e:#}")).wait();
+    } else {
+        clock.put(Vec::<u8>::new()).wait().map_err(zerr("clock"))?;
+    }
+    // Every started host's outcome and files, also after a failure (its
+    // logs say why); a lost host has none to give.
+    let gone = driven.gone.clone();
+    let mut outcomes = Vec::new();
+    for h in started.iter().copied().filter(|h| !gone.contains(h)) {
+        match collect(&session, &placement.hosts[h], &run_id, &opts.out) {
+            Ok(o) => outcomes.push(o),
+            Err(e) => tracing::warn!("cannot collect host {}: {e:#}", placement.hosts[h]),
+        }
+    }
+    drop((fences, failures, lost));
+    let recording = opts.out.join("recording.mcap");
+    let parts: Vec<std::path::PathBuf> = placement
+        .hosts
+        .iter()
+        .map(|h| opts.out.join("parts").join(format!("{h}.mcap")))
+        .filter(|p| p.is_file())
+        .collect();
+    let joined = if parts.is_empty() {
+        Err(anyhow::anyhow!("no host sent a recording"))
+    } else {
+        let inputs: Vec<&Path> = parts.iter().map(|p| p.as_path()).collect();
+        recordings::join_hosts(&inputs, &recording)
+            .with_context(|| format!("cannot join the hosts' recordings {parts:?}"))
+            .map(|r| {
+                tracing::info!(
+                    parts = parts.len(),
+                    messages = r.messages,
+                    "joined the hosts' recordings"
+                );
+                let _ = std::fs::remove_dir_all(opts.out.join("parts"));
+            })
+    };
+    let wall_time_s = result?;
+    joined?;
+    for o in &outcomes {
+        if let Some(e) = &o.error {
+            anyhow::bail!("host {} failed: {e}", o.host);
+        }
+        if o.leftover_shm > 0 {
+            tracing::warn!(host = %o.host, files = o.leftover_shm, "shared memory left on the host");
+        }
+        if o.bridge_lost > 0 {
+            tracing::warn!(host = %o.host, lost = o.bridge_lost, "the bridge lost samples");
+        }
+    }
+    let usage: Vec<_> = outcomes.iter().flat_map(|o| o.usage.clone()).collect();
+    let stats: Vec<_> = outcomes.iter().flat_map(|o| o.stats.clone()).collect();
+    let (mut cpu_time_s, max_rss_kib) = launch::usage_by_kind(&usage, &stats);
+    cpu_time_s.insert("orchestrator".into(), sys::self_cpu_s());
+    cpu_time_s.insert(
+        "host-agent".into(),
+        outcomes.iter().map(|o| o.agent_cpu_s).sum(),
+    );
+    let mut events: Vec<serde_json::Value> =
+        outcomes.iter().flat_map(|o| o.events.clone()).collect();
+    events.sort_by(|a, b| {
+        let t = |v: &serde_json::Value| v.get("t_s").and_then(|t| t.as_f64()).unwrap_or(0.0);
+        t(a).total_cmp(&t(b))
+    });
+    Ok(RunOutcome {
+        run_id,
+        recording,
+        wall_time_s,
+        sim_time_s: driven.ticks as f64 * scenario.rates.tick_s,
+        cpu_time_s,
+        max_rss_kib,
+        processes: outcomes.iter().map(|o| o.usage.len()).sum(),
+        ticks: driven.ticks,
+        stats,
+        events,
+    })
+}
+
+/// Waits until an agent answers as every host of the placement.
+fn await_agents(session: &zenoh::Session, placement: &Placement) -> anyhow::Result<()> {
+    let start = Instant::now();
+    loop {
+        let replies = session
+            .liveliness()
+            .get(wire::ALL_ALIVE)
+            .timeout(Duration::from_secs(2))
+            .wait()
+            .map_err(zerr("liveliness query"))?;
+        let mut present = Vec::new();
+        while let Ok(r) = replies.recv() {
+            if let Ok(s) = r.result() {
+                if let Some(h) = wire::host_of_alive(s.key_expr().as_str()) {
+                    present.push(h.to_string());
+                }
+            }
+        }
+        let missing: Vec<String> = placement
+            .hosts
+            .iter()
+            .filter(|h| !present.contains(h))
+            .cloned()
+            .collect();
+        if missing.is_empty() {
+            return Ok(());
+        }
+        if start.elapsed() > AGENTS_TIMEOUT {
+            let endpoints = missing
+                .iter()
+                .filter_map(|m| placement.hosts.iter().position(|h| h == m))
+                .map(|i| placement.endpoints[i].clone())
+                .collect();
+            present.sort();
+            return Err(HostsError::AgentsMissing {
+                missing,
+                endpoints,
+                present,
+            }
+            .into());
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// Hands every host its share; returns the hosts that started, and the
+/// first failure.
+fn start_all(
+    session: &zenoh::Session,
+    placement: &Placement,
+    order: impl Fn(usize) -> StartOrder,
+) -> (Vec<usize>, Option<anyhow::Error>) {
+    let mut pending = Vec::new();
+    let mut error = None;
+    for (h, name) in placement.hosts.iter().enumerate() {
+        let sent = serde_json::to_vec(&order(h))
+            .map_err(anyhow::Error::from)
+            .and_then(|payload| {
+                session
+                    .get(wire::start(name))
+                    .payload(payload)
+                    // Each reply as it comes (the default holds them to the end).
+                    .consolidation(zenoh::query::ConsolidationMode::None)
+                    .timeout(START_TIMEOUT)
+                    .wait()
+                    .map_err(zerr("start query"))
+            });
+        match sent {
+            Ok(replies) => pending.push((h, replies)),
+            Err(e) => {
+                error.get_or_insert(e);
+            }
+        }
+    }
+    let mut started = Vec::new();
+    for (h, replies) in pending {
+        let name = &placement.hosts[h];
+        match replies.recv() {
+            Ok(r) => match r.result() {
+                Ok(s) => {
+                    started.push(h);
+                    match serde_json::from_slice::<StartReply>(&s.payload().to_bytes()) {
+                        Ok(reply) => tracing::info!(
+                            host = %name,
+                            processes = reply.processes,
+                            exports = reply.exports,
+                            imports = reply.imports,
+                            "host started"
+                        ),
+                        Err(e) => {
+                            error.get_or_insert(anyhow::anyhow!("host {name}: bad reply: {e}"));
+                        }
+                    }
+                }
+                Err(e) => {
+                    // It failed before its processes ran, but may hold files.
+                    started.push(h);
+                    let text = String::from_utf8_lossy(&e.payload().to_bytes()).into_owned();
+                    error.get_or_insert(anyhow::anyhow!("host {name} cannot start: {text}"));
+                }
+            },
+            Err(_) => {
+                error.get_or_insert(anyhow::anyhow!(
+                    "host {name} did not answer the start within {} s",
+                    START_TIMEOUT.as_secs()
+                ));
+            }
+        }
+    }
+    (started, error)
+}
+
+/// What the lockstep loop saw.
+#[derive(Debug, Default)]
+struct Driven {
+    ticks: u64,
+    gone: Vec<usize>,
+}
+
+/// Drives the clock to the end of the run; returns the wall time, s.
+fn drive(
+    opts: &RunOptions,
+    placement: &Placement,
+    clock: &zenoh::pubsub::Publisher<'_>,
+    rx: &Receiver<Heard>,
+    driven: &mut Driven,
+) -> anyhow::Result<f64> {
+    let scenario = &opts.scenario;
+    let procs = scenario.processes();
+    let ticks = scenario.ticks();
+    let tick_ns = (scenario.rates.tick_s * 1e9).round() as u64;
+    let k = placement.len();
+    let bar = crate::progress::bar(
+        opts.progress,
+        scenario.duration_s.ceil() as u64,
+        "s simulated",
+    );
+    let start = Instant::now();
+    let mut fenced = vec![false; k];
+    for tick in 0..ticks {
+        if !procs.iter().any(|p| p.due(tick)) {
+            continue;
+        }
+        let sim_s = (tick * tick_ns) as f64 / 1e9;
+        clock
+            .put(wire::encode_tick(tick).to_vec())
+            .wait()
+            .map_err(zerr("clock"))?;
+        fenced.fill(false);
+        let mut remaining = k;
+        let since = Instant::now();
+        while remaining > 0 {
+            match rx.recv_timeout(Duration::from_millis(100)) {
+                Ok(Heard::Fence(h, t)) if t == tick => {
+                    if !fenced[h] {
+                        fenced[h] = true;
+                        remaining -= 1;
+                    }
+                }
+                Ok(Heard::Fence(..)) => {}
+                Ok(Heard::Failed(h, message)) => {
+                    return Err(HostsError::HostFailed {
+                        host: placement.hosts[h].clone(),
+                        sim_time_s: sim_s,
+                        message,
+                    }
+                    .into())
+                }
+                Ok(Heard::HostGone(name)) => {
+                    if let Some(h) = placement.hosts.iter().position(|x| *x == name) {
+                        driven.gone.push(h);
+                        return Err(HostsError::HostLost {
+                            host: name,
+                            sim_time_s: sim_s,
+                        }
+                        .into());
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => anyhow::bail!("the Zenoh callbacks ended"),
+            }
+            if let Some(sig) = launch::termination_requested() {
+                return Err(RunError::Interrupted(sig).into());
+            }
+            if since.elapsed() > opts.tick_timeout {
+                return Err(HostsError::Hung {
+                    timeout_s: opts.tick_timeout.as_secs_f64(),
+                    sim_time_s: sim_s,
+                    waiting: (0..k)
+                        .filter(|&h| !fenced[h])
+                        .map(|h| placement.hosts[h].clone())
+                        .collect(),
+                }
+                .into());
+            }
+        }
+        driven.ticks = tick + 1;
+        if tick % 50 == 0 {
+            bar.set_position(sim_s as u64);
+        }
+    }
+    bar.finish_and_clear();
+    driven.ticks = ticks;
+    Ok(start.elapsed().as_secs_f64())
+}
+
+/// Takes host `host`'s outcome and files into `out`: its recording as
+/// `parts/<host>.mcap`, its logs into `logs/`.
+fn collect(
+    session: &zenoh::Session,
+    host: &str,
+    run_id: &str,
+    out: &Path,
+) -> anyhow::Result<HostOutcome> {
+    let replies = session
+        .get(wire::finish(host, run_id))
+        .consolidation(zenoh::query::ConsolidationMode::None)
+        .timeout(Duration::from_secs(300))
+        .wait()
+        .map_err(zerr("finish query"))?;
+    let mut outcome: Option<HostOutcome> = None;
+    let mut files: BTreeMap<String, std::fs::File> = BTreeMap::new();
+    while let Ok(r) = replies.recv() {
+        let s = match r.result() {
+            Ok(s) => s,
+            Err(e) => anyhow::bail!(
+                "host {host}: {}",
+                String::from_utf8_lossy(&e.payload().to_bytes())
+            ),
+        };
+        let bytes = s.payload().to_bytes();
+        let Some(att) = s.attachment() else {
+            outcome = Some(serde_json::from_slice(&bytes).context("a host's outcome")?);
+            continue;
+        };
+        let chunk: FileChunk = serde_json::from_slice(&att.to_bytes()).context("a file chunk")?;
+        let rel = Path::new(&chunk.path);
+        anyhow::ensure!(
+            rel.components()
+                .all(|c| matches!(c, std::path::Component::Normal(_))),
+            "host {host} sent a file outside the run: {}",
+            chunk.path
+        );
+        let target = if chunk.path == "recording.mcap" {
+            out.join("parts").join(format!("{host}.mcap"))
+        } else if chunk.path.starts_with("logs/") && !chunk.path.ends_with(".toml") {
+            out.join(rel)
+        } else {
+            continue;
+        };
+        use std::io::{Seek, SeekFrom, Write};
+        if !files.contains_key(&chunk.path) {
+            if let Some(d) = target.parent() {
+                std::fs::create_dir_all(d)?;
+            }
+            let f = std::fs::File::create(&target)
+                .with_context(|| format!("cannot create {}", target.display()))?;
+            files.insert(chunk.path.clone(), f);
+        }
+        if let Some(f) = files.get_mut(&chunk.path) {
+            f.seek(SeekFrom::Start(chunk.offset))?;
+            f.write_all(&bytes)?;
+        }
+    }
+    outcome.with_context(|| format!("host {host} sent no outcome"))
+}

@@ -1,0 +1,23 @@
+//! A run spread over several hosts on Zenoh: one agent per host
+//! (`shoal host`), a placement of the group over them, the crossing
+//! services bridged between iceoryx2 and Zenoh, and a coordinator
+//! (`shoal run --hosts FILE`) that drives the lockstep clock across them
+//! and joins their recordings into one.
+//!
+//! | file | answers |
+//! |---|---|
+//! | [`placement`] | the hosts file; which host runs what; what crosses and its bandwidth |
+//! | [`wire`] | key expressions and messages on Zenoh; why the star keeps lockstep exact |
+//! | [`bridge`] | iceoryx2 services onto Zenoh and back, on one host |
+//! | [`agent`] | `shoal host`: a host's share of a run |
+//! | [`coordinator`] | `shoal run --hosts`: the run over the agents |
+//! | [`netns`] | hosts that share nothing on one machine, for tests and benches |
+
+pub mod agent;
+pub mod bridge;
+pub mod coordinator;
+pub mod netns;
+pub mod placement;
+pub mod wire;
+
+pub use placement::{HostsFile, Placement};

@@ -1,0 +1,355 @@
+//! Hosts that share nothing, on one machine: K Linux network namespaces,
+//! each agent in a mount namespace of its own (private `/dev/shm` and
+//! `/tmp`, so iceoryx2 cannot cross and only Zenoh can), joined by veth
+//! links to a bridge in a switch namespace, addresses only on those links
+//! (169.254.77.0/24, link-local). A coordinator namespace reaches them the
+//! same way. Everything is removed when the [`TestNet`] is dropped, also
+//! after a panic; namespaces a killed harness left are removed by the next.
+//!
+//! Needs root (CAP_SYS_ADMIN, CAP_NET_ADMIN), `ip` (iproute2), `unshare`
+//! and `mount` (util-linux). The tests and `shoal bench hosts` use it.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+
+use super::placement::HostsFile;
+use crate::launch::os as sys;
+
+/// Namespaces of this module start with it.
+const PREFIX: &str = "shoal-net";
+/// The port agents listen on.
+pub const AGENT_PORT: u16 = 7447;
+
+static NEXT: AtomicU32 = AtomicU32::new(0);
+
+/// One host of a [`TestNet`].
+#[derive(Debug)]
+pub struct NetHost {
+    /// Its name (`h1`, ...).
+    pub name: String,
+    /// Its network namespace.
+    pub netns: String,
+    /// Its address on the link.
+    pub addr: String,
+    /// Its switch-side link (cut it to cut the host off).
+    pub port: String,
+    /// Its agent, once started.
+    pub agent: Option<Child>,
+}
+
+/// K hosts and a coordinator namespace joined by a bridge.
+#[derive(Debug)]
+pub struct TestNet {
+    switch: String,
+    /// The coordinator's namespace.
+    pub ctl: String,
+    /// The hosts.
+    pub hosts: Vec<NetHost>,
+}
+
+fn ip(args: &[&str]) -> anyhow::Result<()> {
+    let out = Command::new("ip")
+        .args(args)
+        .output()
+        .context("cannot run `ip` (install iproute2)")?;
+    anyhow::ensure!(
+        out.status.success(),
+        "ip {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr).trim()
+    );
+    Ok(())
+}
+
+/// Namespaces whose harness (the pid in their name) is gone.
+fn stale_namespaces() -> Vec<String> {
+    let Ok(out) = Command::new("ip").args(["netns", "list"]).output() else {
+        return Vec::new();
+    };
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .filter(|n| n.starts_with(PREFIX))
+        .filter(|n| {
+            n.split('-')
+                .nth(2)
+                .and_then(|p| p.parse::<i32>().ok())
+                .is_some_and(|pid| !Path::new(&format!("/proc/{pid}")).exists())
+        })
+        .map(String::from)
+        .collect()
+}
+
+/// Kills every process in network namespace `ns`.
+fn kill_all_in(ns: &str) {
+    for pid in pids_in(ns) {
+        sys::send_signal(pid, libc::SIGKILL);
+    }
+}
+
+/// The processes in network namespace `ns`.
+pub fn pids_in(ns: &str) -> Vec<i32> {
+    Command::new("ip")
+        .args(["netns", "pids", ns])
+        .output()
+        .map(|o| {
+            String::from_utf8_lossy(&o.stdout)
+                .split_whitespace()
+                .filter_map(|p| p.parse().ok())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+impl TestNet {
+    /// Makes `k` hosts, the coordinator's namespace and the switch.
+    pub fn create(k: usize) -> anyhow::Result<Self> {
+        anyhow::ensure!((1..=64).contains(&k), "1 to 64 hosts, not {k}");
+        for ns in stale_namespaces() {
+            kill_all_in(&ns);
+            let _ = ip(&["netns", "del", &ns]);
+        }
+        let tag = format!(
+            "{PREFIX}-{}-{}",
+            std::process::id(),
+            NEXT.fetch_add(1, Ordering::Relaxed)
+        );
+        let mut net = Self {
+            switch: format!("{tag}-sw"),
+            ctl: format!("{tag}-ctl"),
+            hosts: Vec::new(),
+        };
+        // From here on, Drop removes whatever was made.
+        ip(&["netns", "add", &net.switch])?;
+        ip(&["-n", &net.switch, "link", "add", "br0", "type", "bridge"])?;
+        ip(&["-n", &net.switch, "link", "set", "br0", "up"])?;
+        let ctl = net.ctl.clone();
+        net.join(&ctl, "p0", "169.254.77.100")?;
+        for h in 0..k {
+            let name = format!("h{}", h + 1);
+            let netns = format!("{tag}-{name}");
+            let port = format!("p{}", h + 1);
+            let addr = format!("169.254.77.{}", h + 1);
+            net.hosts.push(NetHost {
+                name,
+                netns: netns.clone(),
+                addr: addr.clone(),
+                port: port.clone(),
+                agent: None,
+            });
+            net.join(&netns, &port, &addr)?;
+        }
+        Ok(net)
+    }
+
+    /// Makes namespace `ns` with `eth0` at `addr`, linked to the switch by `port`.
+    fn join(&self, ns: &str, port: &str, addr: &str) -> anyhow::Result<()> {
+        ip(&["netns", "add", ns])?;
+        ip(&[
+            "-n",
+            &self.switch,
+            "link",
+            "add",
+            port,
+            "type",
+            "veth",
+            "peer",
+            "name",
+            "eth0",
+            "netns",
+            ns,
+        ])?;
+        ip(&["-n", &self.switch, "link", "set", port, "master", "br0"])?;
+        ip(&["-n", &self.switch, "link", "set", port, "up"])?;
+        ip(&[
+            "-n",
+            ns,
+            "addr",
+            "add",
+            &format!("{addr}/24"),
+            "dev",
+            "eth0",
+        ])?;
+        ip(&["-n", ns, "link", "set", "eth0", "up"])?;
+        ip(&["-n", ns, "link", "set", "lo", "up"])?;
+        Ok(())
+    }
+
+    /// The endpoint of host `h`'s agent.
+    pub fn endpoint(&self, h: usize) -> String {
+        format!("tcp/{}:{AGENT_PORT}", self.hosts[h].addr)
+    }
+
+    /// A hosts file naming every host.
+    pub fn hosts_file(&self) -> HostsFile {
+        HostsFile::numbered(
+            &(0..self.hosts.len())
+                .map(|h| self.endpoint(h))
+                .collect::<Vec<_>>(),
+        )
+    }
+
+    /// Starts `shoal host` on host `h`, in a mount namespace of its own
+    /// with fresh `/dev/shm` and `/tmp`; the binaries in `bin_dir` are
+    /// bind-mounted at `/mnt/bin` first (they may lie below `/tmp`). Its
+    /// output goes to `log`. Returns at once; the agent answers when its
+    /// liveliness token is up (the coordinator waits for it).
+    pub fn start_agent(&mut self, h: usize, bin_dir: &Path, log: &Path) -> anyhow::Result<()> {
+        let endpoint = self.endpoint(h);
+        let host = &mut self.hosts[h];
+        anyhow::ensure!(
+            host.agent.is_none(),
+            "host {} runs an agent already",
+            host.name
+        );
+        let out = std::fs::File::create(log)
+            .with_context(|| format!("cannot create {}", log.display()))?;
+        let err = out.try_clone()?;
+        let script = "set -e; mount -t tmpfs shoal-mnt /mnt; mkdir /mnt/bin; \
+             mount --bind \"$0\" /mnt/bin; mount -t tmpfs shoal-shm /dev/shm; \
+             mount -t tmpfs shoal-tmp /tmp; exec /mnt/bin/shoal host --bin-dir /mnt/bin \"$@\"";
+        let child = Command::new("ip")
+            .args(["netns", "exec", &host.netns])
+            .args(["unshare", "--mount", "--propagation", "private", "--"])
+            .args(["sh", "-c", script])
+            .arg(bin_dir)
+            .args(["--listen", &endpoint, "--name", &host.name])
+            .stdin(Stdio::null())
+            .stdout(Stdio::from(out))
+            .stderr(Stdio::from(err))
+            .spawn()
+            .context("cannot start an agent")?;
+        host.agent = Some(child);
+        Ok(())
+    }
+
+    /// Starts an agent on every host, logs in `dir/<host>.agent.log`.
+    pub fn start_agents(&mut self, bin_dir: &Path, dir: &Path) -> anyhow::Result<()> {
+        for h in 0..self.hosts.len() {
+            let log = dir.join(format!("{}.agent.log", self.hosts[h].name));
+            self.start_agent(h, bin_dir, &log)?;
+        }
+        Ok(())
+    }
+
+    /// The pid of host `h`'s agent.
+    pub fn agent_pid(&self, h: usize) -> Option<i32> {
+        self.hosts[h].agent.as_ref().map(|c| c.id() as i32)
+    }
+
+    /// Sends `sig` to host `h`'s agent and, unless it is SIGSTOP/SIGCONT,
+    /// reaps it (SIGKILL after `grace`).
+    pub fn stop_agent(
+        &mut self,
+        h: usize,
+        sig: i32,
+        grace: Duration,
+    ) -> Option<std::process::ExitStatus> {
+        let host = &mut self.hosts[h];
+        let mut child = host.agent.take()?;
+        sys::send_signal(child.id() as i32, sig);
+        let start = Instant::now();
+        loop {
+            if let Ok(Some(status)) = child.try_wait() {
+                return Some(status);
+            }
+            if start.elapsed() > grace {
+                let _ = child.kill();
+                return child.wait().ok();
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// A command run in the coordinator's namespace (same mounts as the
+    /// caller: it writes the run's output where the caller can read it).
+    pub fn in_ctl(&self, program: &Path) -> Command {
+        let mut c = Command::new("ip");
+        c.args(["netns", "exec", &self.ctl]).arg(program);
+        c
+    }
+
+    /// A command run in host `h`'s network namespace.
+    pub fn in_host(&self, h: usize, program: &str) -> Command {
+        let mut c = Command::new("ip");
+        c.args(["netns", "exec", &self.hosts[h].netns, program]);
+        c
+    }
+
+    /// Every process in host `h`'s namespace other than its agent (after a
+    /// run: orphans).
+    pub fn others_on(&self, h: usize) -> Vec<i32> {
+        let agent = self.agent_pid(h);
+        pids_in(&self.hosts[h].netns)
+            .into_iter()
+            .filter(|p| Some(*p) != agent)
+            .collect()
+    }
+
+    /// Files in host `h`'s own `/dev/shm` and below its `/tmp/shoal` (the
+    /// iceoryx2 domains), read through its agent's root.
+    pub fn shm_files(&self, h: usize) -> anyhow::Result<Vec<PathBuf>> {
+        let pid = self
+            .agent_pid(h)
+            .with_context(|| format!("host {} has no agent", self.hosts[h].name))?;
+        let root = PathBuf::from(format!("/proc/{pid}/root"));
+        let mut out = Vec::new();
+        for dir in ["dev/shm", "tmp/shoal"] {
+            let mut stack = vec![root.join(dir)];
+            while let Some(d) = stack.pop() {
+                let Ok(entries) = std::fs::read_dir(&d) else {
+                    continue;
+                };
+                for e in entries.flatten() {
+                    let p = e.path();
+                    if p.is_dir() {
+                        stack.push(p);
+                    } else {
+                        out.push(p);
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Takes host `h`'s link down (`up = false`) or back up.
+    pub fn set_link(&self, h: usize, up: bool) -> anyhow::Result<()> {
+        ip(&[
+            "-n",
+            &self.switch,
+            "link",
+            "set",
+            &self.hosts[h].port,
+            if up { "up" } else { "down" },
+        ])
+    }
+
+    fn teardown(&mut self) {
+        for h in 0..self.hosts.len() {
+            self.stop_agent(h, libc::SIGTERM, Duration::from_secs(5));
+        }
+        let all: Vec<String> = self
+            .hosts
+            .iter()
+            .map(|h| h.netns.clone())
+            .chain([self.ctl.clone(), self.switch.clone()])
+            .collect();
+        for ns in &all {
+            kill_all_in(ns);
+        }
+        for ns in &all {
+            let _ = ip(&["netns", "del", ns]);
+        }
+    }
+}
+
+impl Drop for TestNet {
+    fn drop(&mut self) {
+        self.teardown();
+    }
+}

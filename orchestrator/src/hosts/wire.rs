@@ -1,0 +1,250 @@
+//! What crosses hosts on Zenoh: key expressions, the run order, the
+//! lockstep clock and fences, a host's outcome and its files.
+//!
+//! The coordinator (`shoal run --hosts`) is a Zenoh router that connects to
+//! every agent (`shoal host`, also a router, listening); agents never link
+//! to each other, so every message between hosts passes the coordinator's
+//! router. That star is what makes lockstep across hosts exact: a router
+//! forwards the messages of one link in the order they came, so a sample
+//! that host A bridged during tick k reaches host B before the clock of
+//! tick k + 1, which the coordinator sends only after A's fence for tick k
+//! (sent after the sample, on the same link) has reached it. All messages
+//! use one priority, reliable, blocking on congestion (none is dropped).
+//!
+//! | key | from → to | payload |
+//! |---|---|---|
+//! | `shoal-host/<host>/alive` | agent (liveliness) | |
+//! | `shoal-host/<host>/start` | coordinator → agent (query) | [`StartOrder`] JSON; reply [`StartReply`] |
+//! | `shoal-host/<host>/finish/<run>` | coordinator → agent (query) | replies: [`HostOutcome`], then [`FileChunk`]s |
+//! | `shoal-ctl/<run>/coordinator` | coordinator (liveliness) | |
+//! | `shoal-ctl/<run>/clock` | coordinator → agents | tick (u64 LE); empty: the run ends |
+//! | `shoal-ctl/<run>/abort` | coordinator → agents | the reason (UTF-8) |
+//! | `shoal-ctl/<run>/fence/<host>` | agent → coordinator | the tick it closed (u64 LE) |
+//! | `shoal-ctl/<run>/failed/<host>` | agent → coordinator | what failed (UTF-8) |
+//! | `shoal/<run>/…` (the iceoryx2 service name) | publishing host → subscribing hosts | the sample without its zero tail |
+
+use serde::{Deserialize, Serialize};
+use shoal_runtime::Mode;
+
+use super::placement::Placement;
+use crate::launch::ProcessUsage;
+
+/// The liveliness token of an agent.
+pub fn alive(host: &str) -> String {
+    format!("shoal-host/{host}/alive")
+}
+
+/// Every agent's liveliness token.
+pub const ALL_ALIVE: &str = "shoal-host/*/alive";
+
+/// The host named in an agent's liveliness key.
+pub fn host_of_alive(key: &str) -> Option<&str> {
+    key.strip_prefix("shoal-host/")?.strip_suffix("/alive")
+}
+
+/// Everything an agent answers.
+pub fn agent_queries(host: &str) -> String {
+    format!("shoal-host/{host}/**")
+}
+
+/// The start of a run on `host`.
+pub fn start(host: &str) -> String {
+    format!("shoal-host/{host}/start")
+}
+
+/// The end of run `run` on `host`: its outcome and files.
+pub fn finish(host: &str, run: &str) -> String {
+    format!("shoal-host/{host}/finish/{run}")
+}
+
+/// The coordinator's liveliness token for run `run`.
+pub fn coordinator(run: &str) -> String {
+    format!("shoal-ctl/{run}/coordinator")
+}
+
+/// The lockstep clock of run `run`.
+pub fn clock(run: &str) -> String {
+    format!("shoal-ctl/{run}/clock")
+}
+
+/// The abort of run `run`.
+pub fn abort(run: &str) -> String {
+    format!("shoal-ctl/{run}/abort")
+}
+
+/// The fences of `host` in run `run` (`*`: every host's).
+pub fn fence(run: &str, host: &str) -> String {
+    format!("shoal-ctl/{run}/fence/{host}")
+}
+
+/// The failures of `host` in run `run` (`*`: every host's).
+pub fn failed(run: &str, host: &str) -> String {
+    format!("shoal-ctl/{run}/failed/{host}")
+}
+
+/// The last chunk of a key expression.
+pub fn last_chunk(key: &str) -> &str {
+    key.rsplit('/').next().unwrap_or(key)
+}
+
+/// A tick on the wire.
+pub fn encode_tick(tick: u64) -> [u8; 8] {
+    tick.to_le_bytes()
+}
+
+/// A tick from the wire; `None` for anything but 8 bytes.
+pub fn decode_tick(bytes: &[u8]) -> Option<u64> {
+    Some(u64::from_le_bytes(bytes.try_into().ok()?))
+}
+
+/// A sample without its zero tail (a world snapshot holds room for 256
+/// vehicles; a run has fewer).
+pub fn trim(bytes: &[u8]) -> &[u8] {
+    let end = bytes.iter().rposition(|&b| b != 0).map_or(0, |i| i + 1);
+    &bytes[..end]
+}
+
+/// Writes a trimmed sample back over `out`, zeros after it. `false` (and
+/// nothing written) if it is longer than `out`.
+pub fn untrim(wire: &[u8], out: &mut [u8]) -> bool {
+    if wire.len() > out.len() {
+        return false;
+    }
+    out[..wire.len()].copy_from_slice(wire);
+    out[wire.len()..].fill(0);
+    true
+}
+
+/// What the coordinator tells an agent to run.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StartOrder {
+    /// The run id (names every service and key).
+    pub run_id: String,
+    /// This host's index in the placement.
+    pub host: usize,
+    /// Where everything runs.
+    pub placement: Placement,
+    /// The resolved scenario, as `shoal run` writes it.
+    pub scenario_toml: String,
+    /// The effective scenario (defaults filled in), for the recording.
+    pub effective_toml: String,
+    /// Lockstep or realtime.
+    pub mode: Mode,
+    /// Longest a local step may take, s.
+    pub tick_timeout_s: f64,
+    /// Adaptive wait of every process, µs.
+    pub spin_us: u64,
+}
+
+/// An agent's answer once its processes are ready.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StartReply {
+    /// The agent's process id.
+    pub pid: u32,
+    /// Processes it started.
+    pub processes: usize,
+    /// Services it bridges out and in.
+    pub exports: usize,
+    /// Services it bridges in.
+    pub imports: usize,
+}
+
+/// What a host did in a run: the first reply to `finish`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct HostOutcome {
+    /// The host.
+    pub host: String,
+    /// Every reaped process's usage.
+    pub usage: Vec<ProcessUsage>,
+    /// The processes' exit statistics.
+    pub stats: Vec<shoal_runtime::stats::StatsFile>,
+    /// The host's events (faults, deaths, restarts).
+    pub events: Vec<serde_json::Value>,
+    /// CPU time of the agent itself, s.
+    pub agent_cpu_s: f64,
+    /// Samples bridged out to Zenoh, and in from it.
+    pub bridged_out: u64,
+    /// Samples bridged in from Zenoh.
+    pub bridged_in: u64,
+    /// Samples the bridge could not take (iceoryx2 subscriber overflow).
+    pub bridge_lost: u64,
+    /// Why the host's share of the run failed, if it did.
+    pub error: Option<String>,
+    /// The files that follow, relative to the run's output directory.
+    pub files: Vec<String>,
+    /// Shared-memory files of the run left on the host after cleanup.
+    pub leftover_shm: usize,
+}
+
+/// One piece of a file a host sends back (the reply's attachment; the
+/// payload is the bytes).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FileChunk {
+    /// Path relative to the run's output directory.
+    pub path: String,
+    /// Byte offset of this piece.
+    pub offset: u64,
+    /// Size of the whole file.
+    pub total: u64,
+}
+
+/// Bytes per file chunk.
+pub const CHUNK_BYTES: usize = 4 << 20;
+
+/// The Zenoh configuration of an agent: a router listening on `listen`,
+/// connecting to nobody, no scouting (agents link only to the coordinator).
+pub fn agent_config(listen: &[String]) -> anyhow::Result<zenoh::Config> {
+    base_config("router", listen, &[])
+}
+
+/// The Zenoh configuration of a coordinator: a router connecting to every
+/// agent, listening nowhere.
+pub fn coordinator_config(connect: &[String]) -> anyhow::Result<zenoh::Config> {
+    base_config("router", &[], connect)
+}
+
+fn base_config(mode: &str, listen: &[String], connect: &[String]) -> anyhow::Result<zenoh::Config> {
+    let mut c = zenoh::Config::default();
+    let set = |c: &mut zenoh::Config, k: &str, v: String| {
+        c.insert_json5(k, &v)
+            .map_err(|e| anyhow::anyhow!("zenoh configuration {k} = {v}: {e}"))
+    };
+    set(&mut c, "mode", format!("\"{mode}\""))?;
+    set(&mut c, "listen/endpoints", serde_json::to_string(listen)?)?;
+    set(&mut c, "connect/endpoints", serde_json::to_string(connect)?)?;
+    set(&mut c, "scouting/multicast/enabled", "false".into())?;
+    set(&mut c, "scouting/gossip/enabled", "false".into())?;
+    // An agent that is not there yet is retried; a run waits for it.
+    set(&mut c, "connect/timeout_ms", "-1".into())?;
+    Ok(c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn keys_name_their_host_and_run() {
+        assert_eq!(host_of_alive(&alive("h2")), Some("h2"));
+        assert_eq!(last_chunk(&fence("r", "h3")), "h3");
+        assert_eq!(decode_tick(&encode_tick(77)), Some(77));
+        assert_eq!(decode_tick(b"x"), None);
+    }
+
+    proptest! {
+        #[test]
+        fn a_trimmed_sample_comes_back_whole(
+            head in proptest::collection::vec(any::<u8>(), 0..64),
+            zeros in 0usize..64,
+        ) {
+            let mut sample = head.clone();
+            sample.extend(std::iter::repeat_n(0u8, zeros));
+            let wire = trim(&sample);
+            prop_assert!(wire.len() <= head.len());
+            let mut back = vec![0xAAu8; sample.len()];
+            prop_assert!(untrim(wire, &mut back));
+            prop_assert_eq!(back, sample);
+        }
+    }
+}
