@@ -11,8 +11,10 @@ use crate::launch::{self, RunSettings};
 use crate::{plots, preflight};
 
 /// What a run writes into its output directory (and `--force` removes).
-pub const RUN_OUTPUTS: [&str; 7] = [
+pub const RUN_OUTPUTS: [&str; 9] = [
     "recording.mcap",
+    "hosts.json",
+    "parts",
     "summary.json",
     "plots",
     "report.html",

@@ -1,6 +1,7 @@
 //! The benchmarks of `shoal bench`: each prints its figures (never a timed
 //! assertion).
 
+pub mod hosts;
 pub mod ipc;
 pub mod run;
 pub mod scale;

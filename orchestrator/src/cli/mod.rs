@@ -120,6 +120,14 @@ enum BenchCmd {
     /// Cost against group size: N = 5, 25, 50, 100 in lockstep (processes,
     /// real-time factor, CPU per vehicle-second, memory, recorder rate).
     Scale(bench::scale::ScaleCmd),
+    /// What spreading a run over hosts costs, on network namespaces made
+    /// for it (root): the cross-host hop against raw Zenoh, the lockstep
+    /// tick over 1, 2 and 4 hosts, a large group over several hosts, and
+    /// 1,000 vehicles over 16 hosts on paper.
+    Hosts(bench::hosts::HostsBenchCmd),
+    /// One end of `bench hosts`' hop, run inside a host (not by hand).
+    #[command(hide = true)]
+    HopPeer(bench::hosts::HopPeerCmd),
     /// The camera chain without processes: pose error from rendered images
     /// against the point model over ranges and turbidities, and the cost
     /// of a frame (render, detect, identify, PnP).
@@ -157,6 +165,8 @@ pub fn main() -> ExitCode {
         Cmd::Bench(BenchCmd::Run(cmd)) => bench::run::run(cmd),
         Cmd::Bench(BenchCmd::Scale(cmd)) => bench::scale::run(cmd),
         Cmd::Bench(BenchCmd::Vision(cmd)) => bench::vision::run(cmd),
+        Cmd::Bench(BenchCmd::Hosts(cmd)) => bench::hosts::run(cmd),
+        Cmd::Bench(BenchCmd::HopPeer(cmd)) => bench::hosts::hop_peer(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -237,6 +237,28 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
                 let _ = std::fs::remove_dir_all(opts.out.join("parts"));
             })
     };
+    // What each host did, for users and `shoal bench hosts`.
+    let per_host: Vec<serde_json::Value> = outcomes
+        .iter()
+        .map(|o| {
+            serde_json::json!({
+                "host": o.host,
+                "processes": o.usage.len(),
+                "cpu_s": o.usage.iter().map(|u| u.cpu_s).sum::<f64>(),
+                "agent_cpu_s": o.agent_cpu_s,
+                "bridged_out": o.bridged_out,
+                "bridged_in": o.bridged_in,
+                "bridge_lost": o.bridge_lost,
+                "leftover_shm": o.leftover_shm,
+                "error": o.error,
+            })
+        })
+        .collect();
+    let _ = std::fs::write(
+        opts.out.join("hosts.json"),
+        serde_json::to_string_pretty(&serde_json::json!({ "run_id": run_id, "hosts": per_host }))
+            .unwrap_or_default(),
+    );
     let wall_time_s = result?;
     joined?;
     for o in &outcomes {

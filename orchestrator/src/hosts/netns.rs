@@ -193,38 +193,63 @@ impl TestNet {
         )
     }
 
-    /// Starts `shoal host` on host `h`, in a mount namespace of its own
-    /// with fresh `/dev/shm` and `/tmp`; the binaries in `bin_dir` are
-    /// bind-mounted at `/mnt/bin` first (they may lie below `/tmp`). Its
+    /// Starts `shoal host` on host `h` ([`TestNet::spawn_in_host`]); its
     /// output goes to `log`. Returns at once; the agent answers when its
     /// liveliness token is up (the coordinator waits for it).
     pub fn start_agent(&mut self, h: usize, bin_dir: &Path, log: &Path) -> anyhow::Result<()> {
-        let endpoint = self.endpoint(h);
-        let host = &mut self.hosts[h];
         anyhow::ensure!(
-            host.agent.is_none(),
+            self.hosts[h].agent.is_none(),
             "host {} runs an agent already",
-            host.name
+            self.hosts[h].name
         );
+        let endpoint = self.endpoint(h);
+        let name = self.hosts[h].name.clone();
+        let child = self.spawn_in_host(
+            h,
+            bin_dir,
+            &[
+                "host",
+                "--bin-dir",
+                "/mnt/bin",
+                "--listen",
+                &endpoint,
+                "--name",
+                &name,
+            ],
+            log,
+        )?;
+        self.hosts[h].agent = Some(child);
+        Ok(())
+    }
+
+    /// Starts `shoal ARGS` on host `h`, in a mount namespace of its own
+    /// with fresh `/dev/shm` and `/tmp`; the binaries in `bin_dir` are
+    /// bind-mounted at `/mnt/bin` first (they may lie below `/tmp`). Its
+    /// output goes to `log`.
+    pub fn spawn_in_host(
+        &self,
+        h: usize,
+        bin_dir: &Path,
+        args: &[&str],
+        log: &Path,
+    ) -> anyhow::Result<Child> {
         let out = std::fs::File::create(log)
             .with_context(|| format!("cannot create {}", log.display()))?;
         let err = out.try_clone()?;
         let script = "set -e; mount -t tmpfs shoal-mnt /mnt; mkdir /mnt/bin; \
              mount --bind \"$0\" /mnt/bin; mount -t tmpfs shoal-shm /dev/shm; \
-             mount -t tmpfs shoal-tmp /tmp; exec /mnt/bin/shoal host --bin-dir /mnt/bin \"$@\"";
-        let child = Command::new("ip")
-            .args(["netns", "exec", &host.netns])
+             mount -t tmpfs shoal-tmp /tmp; exec /mnt/bin/shoal \"$@\"";
+        Command::new("ip")
+            .args(["netns", "exec", &self.hosts[h].netns])
             .args(["unshare", "--mount", "--propagation", "private", "--"])
             .args(["sh", "-c", script])
             .arg(bin_dir)
-            .args(["--listen", &endpoint, "--name", &host.name])
+            .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::from(out))
             .stderr(Stdio::from(err))
             .spawn()
-            .context("cannot start an agent")?;
-        host.agent = Some(child);
-        Ok(())
+            .context("cannot start a process on a host")
     }
 
     /// Starts an agent on every host, logs in `dir/<host>.agent.log`.

@@ -203,6 +203,12 @@ pub fn coordinator_config(connect: &[String]) -> anyhow::Result<zenoh::Config> {
     base_config("router", &[], connect)
 }
 
+/// A router listening on `listen` and connecting to `connect` (the
+/// benchmark's peers).
+pub fn router_config(listen: &[String], connect: &[String]) -> anyhow::Result<zenoh::Config> {
+    base_config("router", listen, connect)
+}
+
 fn base_config(mode: &str, listen: &[String], connect: &[String]) -> anyhow::Result<zenoh::Config> {
     let mut c = zenoh::Config::default();
     let set = |c: &mut zenoh::Config, k: &str, v: String| {
