@@ -21,3 +21,25 @@ pub mod placement;
 pub mod wire;
 
 pub use placement::{HostsFile, Placement};
+
+/// Every file below `dir`, sorted (directories that cannot be read are
+/// skipped): a run's files to send back, a host's shared memory to check.
+pub(crate) fn files_under(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p);
+            }
+        }
+    }
+    out.sort();
+    out
+}

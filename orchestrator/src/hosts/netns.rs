@@ -324,20 +324,7 @@ impl TestNet {
         let root = PathBuf::from(format!("/proc/{pid}/root"));
         let mut out = Vec::new();
         for dir in ["dev/shm", "tmp/shoal"] {
-            let mut stack = vec![root.join(dir)];
-            while let Some(d) = stack.pop() {
-                let Ok(entries) = std::fs::read_dir(&d) else {
-                    continue;
-                };
-                for e in entries.flatten() {
-                    let p = e.path();
-                    if p.is_dir() {
-                        stack.push(p);
-                    } else {
-                        out.push(p);
-                    }
-                }
-            }
+            out.extend(super::files_under(&root.join(dir)));
         }
         Ok(out)
     }
