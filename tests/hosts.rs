@@ -229,3 +229,100 @@ fn a_link_cut_past_the_lease_stops_every_host_cleanly_with_the_cause_named() {
     let log = std::fs::read_to_string(dir.join("h2.agent.log")).unwrap();
     assert!(log.contains("the coordinator is gone"), "{log}");
 }
+
+/// `shoal run --quiet --mode MODE SCENARIO --hosts HOSTS --out OUT` in the
+/// coordinator's namespace, to its end; panics with the agents' logs if it
+/// fails.
+fn run_over_hosts(net: &TestNet, dir: &Path, mode: &str, scenario: &Path, out: &Path) {
+    let o = net
+        .in_ctl(&bin_dir().join("shoal"))
+        .args(["run", "--quiet", "--mode", mode])
+        .arg(scenario)
+        .arg("--hosts")
+        .arg(dir.join("hosts.toml"))
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    let agent_logs: String = (1..=net.hosts.len())
+        .map(|h| std::fs::read_to_string(dir.join(format!("h{h}.agent.log"))).unwrap_or_default())
+        .collect();
+    assert!(
+        o.status.success(),
+        "shoal run --mode {mode} --hosts: {}\nagents:\n{agent_logs}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+#[test]
+fn a_realtime_run_over_two_hosts_starts_every_host_at_one_epoch_and_the_agents_serve_on() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (net, _) = net_with_agents(dir, 2);
+    let text = std::fs::read_to_string(repo_root().join("scenarios/paper.toml")).unwrap();
+    let text = text.replacen("duration_s = ", "duration_s = 8.0\n# was: ", 1);
+    let sc = write_scenario(dir, "paper8.toml", &text);
+    let out = dir.join("rt");
+    run_over_hosts(&net, dir, "realtime", &sc, &out);
+    let s = summary(&out);
+    assert_eq!(s["mode"], "realtime");
+    // Every process of both hosts ran on the one clock: each stepped at
+    // its rate through the run.
+    for kind in PROCESS_KINDS {
+        let steps = s["step_us"][kind]["count"].as_u64().unwrap_or(0);
+        assert!(steps >= 60, "{kind} stepped {steps} times in 8 s at 10 Hz");
+    }
+    // The bridged channels' hop latencies are on the receiving host's
+    // clock (stamps moved by the measured offsets), so they are positive.
+    for kind in ["truth", "world"] {
+        let h = &s["latency_us"]["hops"][kind];
+        let (p50, p99, max) = (
+            h["p50"].as_f64().unwrap(),
+            h["p99"].as_f64().unwrap(),
+            h["max"].as_f64().unwrap(),
+        );
+        assert!(0.0 < p50 && p50 <= p99 && p99 <= max, "{kind}: {h}");
+    }
+    // The clocks: both hosts share this kernel's monotonic clock, so the
+    // true offset is 0, and it lies within the stated error at the start
+    // and at the end.
+    let hosts: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("hosts.json")).unwrap()).unwrap();
+    for h in hosts["clock"]["hosts"].as_array().unwrap() {
+        for at in ["start", "end"] {
+            let (offset, error) = (
+                h[at]["offset_us"].as_f64().unwrap(),
+                h[at]["error_us"].as_f64().unwrap(),
+            );
+            assert!(offset.abs() <= error, "{}: {at}: {h}", h["host"]);
+        }
+    }
+    // The world, on one host, saw the vehicles of the other live: its
+    // last snapshot puts each vehicle near its last recorded truth.
+    let rec = Recording::open(&out.join("recording.mcap")).unwrap();
+    let world = rec.samples::<ipc_types::World>("/world");
+    let last = world.last().expect("no world snapshot");
+    let names: Vec<String> = shoal_scenario::Scenario::from_toml(&text)
+        .unwrap()
+        .vehicles
+        .iter()
+        .map(|v| v.name.clone())
+        .collect();
+    assert_eq!(last.count as usize, names.len(), "{names:?}");
+    for (i, name) in names.iter().enumerate() {
+        let truth = rec.samples::<ipc_types::Truth>(&format!("/{name}/truth"));
+        let t = truth.last().unwrap().position_ned_m;
+        let w = last.vehicles[i].position_ned_m;
+        let d = ((t[0] - w[0]).powi(2) + (t[1] - w[1]).powi(2) + (t[2] - w[2]).powi(2)).sqrt();
+        assert!(d < 3.0, "{name}: the world has it {d:.2} m from its truth");
+    }
+    for h in 0..2 {
+        assert_eq!(net.others_on(h), Vec::<i32>::new(), "orphans on h{}", h + 1);
+        assert_eq!(net.shm_files(h).unwrap(), Vec::<PathBuf>::new());
+    }
+    // The same agents serve the next runs, lockstep then realtime again.
+    let short = write_scenario(dir, "short.toml", &small_scenario("short", 4.0));
+    run_over_hosts(&net, dir, "lockstep", &short, &dir.join("ls"));
+    run_over_hosts(&net, dir, "realtime", &short, &dir.join("rt2"));
+    assert!(dir.join("rt2/recording.mcap").is_file());
+}

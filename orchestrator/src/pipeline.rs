@@ -11,9 +11,11 @@ use crate::launch::{self, RunSettings};
 use crate::{plots, preflight};
 
 /// What a run writes into its output directory (and `--force` removes).
-pub const RUN_OUTPUTS: [&str; 9] = [
+pub const RUN_OUTPUTS: [&str; 11] = [
     "recording.mcap",
     "hosts.json",
+    "hosts.toml",
+    "agents",
     "parts",
     "summary.json",
     "plots",

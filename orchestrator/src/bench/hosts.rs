@@ -273,6 +273,7 @@ fn hop<T: Sample>(
                 &crossings,
                 usize::from(!ping_side),
                 200,
+                &[],
                 &tx,
             )?;
             let limits = if what == "world" {

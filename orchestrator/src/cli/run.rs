@@ -43,8 +43,13 @@ pub struct RunCmd {
     spin_us: u64,
     /// Spread the run over the hosts of this file (TOML: `[[host]]` with
     /// `name`, `endpoint` and optional `vehicles`; `[placement] world`),
-    /// each running `shoal host`. Lockstep only.
-    #[arg(long)]
+    /// each running `shoal host`; or over `netns:K`, K hosts made here as
+    /// network namespaces that share nothing, each with its agent (root;
+    /// OUT/hosts.toml and OUT/agents/ keep the file and the agents' logs).
+    /// In realtime every host starts at the run's epoch on its own clock,
+    /// corrected by the offset measured from query round trips
+    /// (hosts.json gives it).
+    #[arg(long, value_name = "FILE|netns:K")]
     hosts: Option<PathBuf>,
 }
 
@@ -83,7 +88,14 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
         .unwrap_or_else(|| launch::default_out(&scenario));
     let mut settings = cmd.processes.settings(cmd.mode, cmd.quiet)?;
     settings.spin_us = cmd.spin_us;
-    if let Some(path) = &cmd.hosts {
+    let local = cmd
+        .hosts
+        .as_ref()
+        .and_then(|p| p.to_str())
+        .and_then(crate::hosts::netns::parse_local)
+        .transpose()
+        .map_err(anyhow::Error::msg)?;
+    if let (Some(path), None) = (&cmd.hosts, local) {
         let file = crate::hosts::HostsFile::load(path)?;
         // Refused here, before anything starts, if it cannot place the group.
         crate::hosts::Placement::new(&file, &scenario)?;
@@ -92,6 +104,22 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
     if cmd.force {
         pipeline::clear_outputs(&out)?;
     }
+    // netns:K: the hosts are made here and removed when the run is over
+    // (the guard first: this thread goes home before the net goes).
+    let _local = match local {
+        Some(k) => {
+            std::fs::create_dir_all(&out)?;
+            let bin = launch::bin_dir_or_default(cmd.processes.bin_dir.clone())?;
+            let hosts_toml = out.join("hosts.toml");
+            let (net, guard) =
+                crate::hosts::netns::local_hosts(k, &bin, &out.join("agents"), &hosts_toml)?;
+            let file = crate::hosts::HostsFile::load(&hosts_toml)?;
+            crate::hosts::Placement::new(&file, &scenario)?;
+            settings.hosts = Some(file);
+            Some((guard, net))
+        }
+        None => None,
+    };
     let summary = pipeline::run_and_summarize(scenario, &out, &settings)?.summary;
     if !cmd.quiet {
         print_table(&summary);

@@ -51,15 +51,16 @@ pub fn serve(opts: &AgentOptions) -> anyhow::Result<()> {
     let session = zenoh::open(wire::agent_config(&opts.listen)?)
         .wait()
         .map_err(|e| anyhow::anyhow!("cannot open a Zenoh session on {:?}: {e}", opts.listen))?;
+    // The queryable first: a coordinator that sees the token may ask at once.
+    let queries = session
+        .declare_queryable(wire::agent_queries(&opts.name))
+        .wait()
+        .map_err(|e| anyhow::anyhow!("queryable: {e}"))?;
     let _alive = session
         .liveliness()
         .declare_token(wire::alive(&opts.name))
         .wait()
         .map_err(|e| anyhow::anyhow!("liveliness token: {e}"))?;
-    let queries = session
-        .declare_queryable(wire::agent_queries(&opts.name))
-        .wait()
-        .map_err(|e| anyhow::anyhow!("queryable: {e}"))?;
     tracing::info!(name = %opts.name, listen = ?opts.listen, "host agent ready");
     eprintln!(
         "shoal host {} listening on {}",
@@ -78,7 +79,10 @@ pub fn serve(opts: &AgentOptions) -> anyhow::Result<()> {
             Err(e) => anyhow::bail!("the queryable closed: {e}"),
         };
         let key = query.key_expr().as_str().to_string();
-        if key == wire::start(&opts.name) {
+        if key == wire::time(&opts.name) {
+            let now = shoal_runtime::mono_ns().to_le_bytes().to_vec();
+            let _ = query.reply(query.key_expr().clone(), now).wait();
+        } else if key == wire::start(&opts.name) {
             let order = query
                 .payload()
                 .map(|p| p.to_bytes().into_owned())
@@ -156,6 +160,9 @@ fn send_back(query: &zenoh::query::Query, f: &Finished) -> anyhow::Result<()> {
 
 /// The live state of this host's share of a run.
 struct Share {
+    mode: shoal_runtime::Mode,
+    /// Realtime: the run's epoch on this host's monotonic clock, ns.
+    epoch_mono_ns: u64,
     scenario: Scenario,
     procs: Vec<ProcessSpec>,
     local: Vec<bool>,
@@ -188,6 +195,8 @@ fn run_share(
     start: zenoh::query::Query,
 ) -> Finished {
     let out = opts.work.join(&order.run_id);
+    // The agent serves many runs: this one's CPU is what it adds.
+    let cpu_before = sys::self_cpu_s();
     let mut sup = Supervisor::default();
     let mut outcome = HostOutcome {
         host: opts.name.clone(),
@@ -251,7 +260,7 @@ fn run_share(
     let _ = shoal_runtime::release_domain(&order.run_id);
     outcome.leftover_shm = shoal_runtime::list_domain_files(&order.run_id).len();
     outcome.usage = launch::child_usage(&sup);
-    outcome.agent_cpu_s = sys::self_cpu_s();
+    outcome.agent_cpu_s = sys::self_cpu_s() - cpu_before;
     outcome.files = files_below(&out);
     Finished {
         run_id: order.run_id,
@@ -277,10 +286,6 @@ fn prepare(
     out: &Path,
     sup: &mut Supervisor,
 ) -> anyhow::Result<Share> {
-    anyhow::ensure!(
-        order.mode == shoal_runtime::Mode::Lockstep,
-        "runs over hosts are lockstep only"
-    );
     let scenario = Scenario::from_toml(&order.scenario_toml).context("the run's scenario")?;
     let me = order.host;
     let placement = &order.placement;
@@ -318,7 +323,7 @@ fn prepare(
         run_id: run_id.clone(),
         processes: procs.len(),
         mode: order.mode,
-        epoch_mono_ns: 0,
+        epoch_mono_ns: order.epoch_mono_ns,
         spin_us: order.spin_us,
         scenario_path,
         scenario: scenario.clone(),
@@ -343,6 +348,7 @@ fn prepare(
         &crossings,
         me,
         scenario.vehicles.len(),
+        &order.stamp_shift_ns,
         &tx,
     )?;
     let zerr = |what: &str| {
@@ -422,6 +428,8 @@ fn prepare(
         Duration::from_secs(60).max(tick_timeout),
     )?;
     Ok(Share {
+        mode: order.mode,
+        epoch_mono_ns: order.epoch_mono_ns,
         scenario,
         procs,
         local,
@@ -438,8 +446,53 @@ fn prepare(
 }
 
 impl Share {
-    /// Follows the coordinator's clock to the end of the run.
+    /// Runs this host's share to the end of the run.
     fn drive(&mut self, sup: &mut Supervisor) -> anyhow::Result<()> {
+        match self.mode {
+            shoal_runtime::Mode::Lockstep => self.lockstep(sup),
+            shoal_runtime::Mode::Realtime => self.realtime(sup),
+        }
+    }
+
+    /// Realtime: the processes run on their own clocks from the epoch; the
+    /// agent bridges samples in as they come and out every millisecond,
+    /// supervises, and ends when the coordinator says so.
+    fn realtime(&mut self, sup: &mut Supervisor) -> anyhow::Result<()> {
+        const FORWARD: Duration = Duration::from_millis(1);
+        const KEEP: Duration = Duration::from_millis(100);
+        let epoch = self.epoch_mono_ns;
+        let end = epoch + (self.scenario.duration_s * 1e9) as u64;
+        let late = end + self.tick_timeout.as_nanos() as u64 + 5_000_000_000;
+        let mut next_keep = Instant::now();
+        loop {
+            match self.rx.recv_timeout(FORWARD) {
+                Ok(Inbound::Sample { index, bytes }) => self.bridge.receive(index, &bytes)?,
+                Ok(Inbound::Clock(_)) | Err(RecvTimeoutError::Timeout) => {}
+                Ok(Inbound::End) => return Ok(()),
+                Ok(Inbound::Abort(reason)) => return Err(Stopped::Aborted(reason).into()),
+                Ok(Inbound::CoordinatorGone) => return Err(Stopped::CoordinatorGone.into()),
+                Err(RecvTimeoutError::Disconnected) => anyhow::bail!("the Zenoh callbacks ended"),
+            }
+            self.bridge.forward()?;
+            if Instant::now() >= next_keep {
+                next_keep = Instant::now() + KEEP;
+                if let Some(sig) = launch::termination_requested() {
+                    return Err(launch::RunError::Interrupted(sig).into());
+                }
+                let now = shoal_runtime::mono_ns();
+                let t_s = now.saturating_sub(epoch) as f64 * 1e-9;
+                self.ports.keep_realtime(&self.procs, sup, t_s)?;
+                anyhow::ensure!(
+                    now <= late,
+                    "the coordinator did not end the run {:.0} s after its end",
+                    (now - end) as f64 * 1e-9
+                );
+            }
+        }
+    }
+
+    /// Lockstep: follows the coordinator's clock to the end of the run.
+    fn lockstep(&mut self, sup: &mut Supervisor) -> anyhow::Result<()> {
         let scenario = &self.scenario;
         let ticks = scenario.ticks();
         let tick_ns = (scenario.rates.tick_s * 1e9).round() as u64;

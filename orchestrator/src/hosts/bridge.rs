@@ -62,14 +62,23 @@ trait Import {
 
 struct TypedImport<T: Sample> {
     publisher: Publisher<T>,
+    /// Added to the sample's monotonic stamps: the sending host's clock to
+    /// this one's.
+    shift_ns: i64,
 }
 
 impl<T: Sample> Import for TypedImport<T> {
     fn send(&mut self, bytes: &[u8]) -> anyhow::Result<()> {
         let service = self.publisher.service().to_string();
         let mut fits = true;
+        let shift = self.shift_ns;
         self.publisher.publish_stamped_in_place(|t| {
             fits = wire::untrim(bytes, bytemuck::bytes_of_mut(t));
+            if shift != 0 {
+                let h = t.header_mut();
+                h.publish_mono_ns = wire::shift_stamp(h.publish_mono_ns, shift);
+                h.origin_mono_ns = wire::shift_stamp(h.origin_mono_ns, shift);
+            }
         })?;
         anyhow::ensure!(
             fits,
@@ -115,13 +124,15 @@ pub struct Bridge {
 
 impl Bridge {
     /// Opens the crossings of host `me`: exports where it publishes,
-    /// imports where it subscribes; imported samples go to `tx`.
+    /// imports where it subscribes; imported samples go to `tx`, their
+    /// monotonic stamps moved by `stamp_shift_ns[from]` (none if absent).
     pub fn open(
         session: &zenoh::Session,
         node: &Node<ipc::Service>,
         crossings: &[Crossing],
         me: usize,
         vehicles: usize,
+        stamp_shift_ns: &[i64],
         tx: &Sender<Inbound>,
     ) -> anyhow::Result<Self> {
         let mut exports: Vec<Box<dyn Export>> = Vec::new();
@@ -151,12 +162,15 @@ impl Bridge {
                 });
             } else if c.to.contains(&me) {
                 let index = imports.len();
+                let shift_ns = stamp_shift_ns.get(c.from).copied().unwrap_or(0);
                 imports.push(match c.what {
                     "world" => Box::new(TypedImport::<World> {
                         publisher: shoal_runtime::node_publisher(node, &c.service, &limits)?,
+                        shift_ns,
                     }),
                     _ => Box::new(TypedImport::<Truth> {
                         publisher: shoal_runtime::node_publisher(node, &c.service, &limits)?,
+                        shift_ns,
                     }),
                 });
                 let tx = tx.clone();

@@ -81,10 +81,6 @@ fn zerr(what: &'static str) -> impl Fn(zenoh::Error) -> anyhow::Error {
 /// Runs `opts.scenario` over the hosts of `hosts`.
 pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
     let scenario = &opts.scenario;
-    anyhow::ensure!(
-        opts.mode == shoal_runtime::Mode::Lockstep,
-        "runs over hosts are lockstep only (realtime over hosts is not built yet)"
-    );
     let placement = Placement::new(hosts, scenario)?;
     std::fs::create_dir_all(opts.out.join("logs"))
         .with_context(|| format!("cannot create {}", opts.out.display()))?;
@@ -101,6 +97,15 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
         .wait()
         .map_err(zerr("session"))?;
     await_agents(&session, &placement)?;
+    // Each host's monotonic clock against this one's: realtime puts the
+    // epoch on every host's clock with it, and samples' stamps move with it
+    // from host to host.
+    let offsets = measure_offsets(&session, &placement)?;
+    for (h, o) in placement.hosts.iter().zip(&offsets) {
+        tracing::info!(host = %h, offset_us = o.offset_ns as f64 / 1e3, error_us = o.error_ns as f64 / 1e3, "clock offset");
+    }
+    let epoch = (opts.mode == shoal_runtime::Mode::Realtime)
+        .then(|| shoal_runtime::mono_ns() + launch::epoch_margin_ns(scenario.processes().len()));
 
     let (tx, rx) = mpsc::channel();
     let index_of: BTreeMap<String, usize> = placement
@@ -192,12 +197,18 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
         mode: opts.mode,
         tick_timeout_s: opts.tick_timeout.as_secs_f64(),
         spin_us: opts.spin_us,
+        epoch_mono_ns: epoch.map_or(0, |e| offsets[h].to_agent(e)),
+        stamp_shift_ns: offsets
+            .iter()
+            .map(|from| offsets[h].offset_ns - from.offset_ns)
+            .collect(),
     };
     let (started, start_error) = start_all(&session, &placement, order);
     let mut driven = Driven::default();
-    let result = match start_error {
-        Some(e) => Err(e),
-        None => drive(opts, &placement, &clock, &rx, &mut driven),
+    let result = match (start_error, epoch) {
+        (Some(e), _) => Err(e),
+        (None, None) => drive(opts, &placement, &clock, &rx, &mut driven),
+        (None, Some(epoch)) => drive_realtime(opts, &placement, &rx, &mut driven, epoch),
     };
     if let Err(e) = &result {
         let _ = abort.put(format!("{e:#}")).wait();
@@ -207,6 +218,12 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
     // Every started host's outcome and files, also after a failure (its
     // logs say why); a lost host has none to give.
     let gone = driven.gone.clone();
+    // Read again at the end: how far the clocks drifted over the run.
+    let offsets_after = if gone.is_empty() {
+        measure_offsets(&session, &placement).ok()
+    } else {
+        None
+    };
     let mut outcomes = Vec::new();
     for h in started.iter().copied().filter(|h| !gone.contains(h)) {
         match collect(&session, &placement.hosts[h], &run_id, &opts.out) {
@@ -254,10 +271,39 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
             })
         })
         .collect();
+    let clock: Vec<serde_json::Value> = placement
+        .hosts
+        .iter()
+        .enumerate()
+        .map(|(h, name)| {
+            let us = |o: Option<&wire::ClockOffset>| {
+                o.map(|o| {
+                    serde_json::json!({
+                        "offset_us": o.offset_ns as f64 / 1e3,
+                        "error_us": o.error_ns as f64 / 1e3,
+                    })
+                })
+            };
+            serde_json::json!({
+                "host": name,
+                "start": us(offsets.get(h)),
+                "end": us(offsets_after.as_ref().and_then(|a| a.get(h))),
+            })
+        })
+        .collect();
     let _ = std::fs::write(
         opts.out.join("hosts.json"),
-        serde_json::to_string_pretty(&serde_json::json!({ "run_id": run_id, "hosts": per_host }))
-            .unwrap_or_default(),
+        serde_json::to_string_pretty(&serde_json::json!({
+            "run_id": run_id,
+            "mode": opts.mode.as_str(),
+            "hosts": per_host,
+            "clock": {
+                "method": CLOCK_METHOD,
+                "readings_per_host": CLOCK_READINGS,
+                "hosts": clock,
+            },
+        }))
+        .unwrap_or_default(),
     );
     let wall_time_s = result?;
     joined?;
@@ -298,6 +344,50 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
         stats,
         events,
     })
+}
+
+/// Clock readings per host and measurement.
+const CLOCK_READINGS: usize = 16;
+
+/// How the hosts' clocks agree, as `hosts.json` says.
+const CLOCK_METHOD: &str = "each host's monotonic clock against the coordinator's, from the fastest of the query round trips (Cristian); the true offset lies within error_us of offset_us. Realtime runs start every host at the coordinator's epoch put on the host's own clock by its offset; bridged samples' stamps move by the difference of the two hosts' offsets";
+
+/// Reads every agent's monotonic clock [`CLOCK_READINGS`] times.
+fn measure_offsets(
+    session: &zenoh::Session,
+    placement: &Placement,
+) -> anyhow::Result<Vec<wire::ClockOffset>> {
+    placement
+        .hosts
+        .iter()
+        .map(|host| {
+            let mut readings = Vec::with_capacity(CLOCK_READINGS);
+            for _ in 0..CLOCK_READINGS {
+                let sent_ns = shoal_runtime::mono_ns();
+                let replies = session
+                    .get(wire::time(host))
+                    .consolidation(zenoh::query::ConsolidationMode::None)
+                    .timeout(Duration::from_secs(2))
+                    .wait()
+                    .map_err(zerr("clock query"))?;
+                let Ok(reply) = replies.recv() else { continue };
+                let received_ns = shoal_runtime::mono_ns();
+                if let Some(agent_ns) = reply
+                    .result()
+                    .ok()
+                    .and_then(|s| wire::decode_tick(&s.payload().to_bytes()))
+                {
+                    readings.push(wire::ClockReading {
+                        sent_ns,
+                        agent_ns,
+                        received_ns,
+                    });
+                }
+            }
+            wire::ClockOffset::estimate(&readings)
+                .with_context(|| format!("host {host} did not answer a clock reading"))
+        })
+        .collect()
 }
 
 /// Waits until an agent answers as every host of the placement.
@@ -419,6 +509,77 @@ struct Driven {
     gone: Vec<usize>,
 }
 
+impl Driven {
+    /// The error `heard` is, at simulated time `sim_s`, if it is one (a
+    /// lost host is noted: it has nothing left to collect).
+    fn stop_cause(
+        &mut self,
+        heard: Heard,
+        placement: &Placement,
+        sim_s: f64,
+    ) -> Option<HostsError> {
+        match heard {
+            Heard::Fence(..) => None,
+            Heard::Failed(h, message) => Some(HostsError::HostFailed {
+                host: placement.hosts[h].clone(),
+                sim_time_s: sim_s,
+                message,
+            }),
+            Heard::HostGone(name) => {
+                let h = placement.hosts.iter().position(|x| *x == name)?;
+                self.gone.push(h);
+                Some(HostsError::HostLost {
+                    host: name,
+                    sim_time_s: sim_s,
+                })
+            }
+        }
+    }
+}
+
+/// Realtime: waits out the run from `epoch` (the coordinator's clock; every
+/// host runs on its own clock from the same instant), watching for a
+/// failed or lost host; returns the run's length, s.
+fn drive_realtime(
+    opts: &RunOptions,
+    placement: &Placement,
+    rx: &Receiver<Heard>,
+    driven: &mut Driven,
+    epoch: u64,
+) -> anyhow::Result<f64> {
+    let scenario = &opts.scenario;
+    let end = epoch + (scenario.duration_s * 1e9) as u64;
+    let bar = crate::progress::bar(
+        opts.progress,
+        scenario.duration_s.ceil() as u64,
+        "s simulated",
+    );
+    loop {
+        let now = shoal_runtime::mono_ns();
+        if now >= end {
+            break;
+        }
+        let t_s = now.saturating_sub(epoch) as f64 * 1e-9;
+        let wait = Duration::from_nanos(end - now).min(Duration::from_millis(100));
+        match rx.recv_timeout(wait) {
+            Ok(heard) => {
+                if let Some(e) = driven.stop_cause(heard, placement, t_s) {
+                    return Err(e.into());
+                }
+            }
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => anyhow::bail!("the Zenoh callbacks ended"),
+        }
+        if let Some(sig) = launch::termination_requested() {
+            return Err(RunError::Interrupted(sig).into());
+        }
+        bar.set_position(t_s as u64);
+    }
+    bar.finish_and_clear();
+    driven.ticks = (scenario.duration_s / scenario.rates.tick_s).round() as u64;
+    Ok((end - epoch) as f64 * 1e-9)
+}
+
 /// Drives the clock to the end of the run; returns the wall time, s.
 fn drive(
     opts: &RunOptions,
@@ -459,23 +620,9 @@ fn drive(
                         remaining -= 1;
                     }
                 }
-                Ok(Heard::Fence(..)) => {}
-                Ok(Heard::Failed(h, message)) => {
-                    return Err(HostsError::HostFailed {
-                        host: placement.hosts[h].clone(),
-                        sim_time_s: sim_s,
-                        message,
-                    }
-                    .into())
-                }
-                Ok(Heard::HostGone(name)) => {
-                    if let Some(h) = placement.hosts.iter().position(|x| *x == name) {
-                        driven.gone.push(h);
-                        return Err(HostsError::HostLost {
-                            host: name,
-                            sim_time_s: sim_s,
-                        }
-                        .into());
+                Ok(heard) => {
+                    if let Some(e) = driven.stop_cause(heard, placement, sim_s) {
+                        return Err(e.into());
                     }
                 }
                 Err(RecvTimeoutError::Timeout) => {}

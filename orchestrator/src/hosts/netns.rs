@@ -84,9 +84,10 @@ fn stale_namespaces() -> Vec<String> {
         .collect()
 }
 
-/// Kills every process in network namespace `ns`.
+/// Kills every process in network namespace `ns` (but this one).
 fn kill_all_in(ns: &str) {
-    for pid in pids_in(ns) {
+    let me = std::process::id() as i32;
+    for pid in pids_in(ns).into_iter().filter(|p| *p != me) {
         sys::send_signal(pid, libc::SIGKILL);
     }
 }
@@ -290,6 +291,18 @@ impl TestNet {
         }
     }
 
+    /// Moves the calling thread into the coordinator's namespace: the
+    /// threads and processes it starts from here on (a Zenoh session's)
+    /// reach the hosts. The guard moves it back home.
+    pub fn enter_ctl(&self) -> anyhow::Result<CtlGuard> {
+        let home = std::fs::File::open("/proc/thread-self/ns/net")
+            .context("cannot open this thread's network namespace")?;
+        let ctl = std::fs::File::open(format!("/var/run/netns/{}", self.ctl))
+            .with_context(|| format!("no namespace {}", self.ctl))?;
+        sys::enter_netns(&ctl).context("cannot enter the coordinator's namespace")?;
+        Ok(CtlGuard { home })
+    }
+
     /// A command run in the coordinator's namespace (same mounts as the
     /// caller: it writes the run's output where the caller can read it).
     pub fn in_ctl(&self, program: &Path) -> Command {
@@ -358,6 +371,54 @@ impl TestNet {
             let _ = ip(&["netns", "del", ns]);
         }
     }
+}
+
+/// Holds the calling thread in the coordinator's namespace (see
+/// [`TestNet::enter_ctl`]); dropped, it moves it back.
+#[derive(Debug)]
+pub struct CtlGuard {
+    home: std::fs::File,
+}
+
+impl Drop for CtlGuard {
+    fn drop(&mut self) {
+        if let Err(e) = sys::enter_netns(&self.home) {
+            tracing::warn!("cannot return to this process's network namespace: {e}");
+        }
+    }
+}
+
+/// `shoal run --hosts netns:K`: K hosts made here, their agents up, a hosts
+/// file naming them written to `hosts_toml`, and the calling thread in the
+/// coordinator's namespace. Drop the guard before the net.
+pub fn local_hosts(
+    k: usize,
+    bin_dir: &Path,
+    logs: &Path,
+    hosts_toml: &Path,
+) -> anyhow::Result<(TestNet, CtlGuard)> {
+    anyhow::ensure!(
+        (1..=16).contains(&k),
+        "netns:K takes 1 to 16 hosts, not {k}"
+    );
+    let mut net = TestNet::create(k)
+        .context("netns:K makes network namespaces (run as root, with iproute2 and util-linux)")?;
+    std::fs::create_dir_all(logs)?;
+    net.start_agents(bin_dir, logs)?;
+    std::fs::write(hosts_toml, toml::to_string(&net.hosts_file())?)?;
+    let guard = net.enter_ctl()?;
+    Ok((net, guard))
+}
+
+/// The K of a `netns:K` hosts argument; `None` for a file's path.
+pub fn parse_local(spec: &str) -> Option<Result<usize, String>> {
+    let k = spec.strip_prefix("netns:")?;
+    Some(
+        k.parse::<usize>()
+            .ok()
+            .filter(|k| (1..=16).contains(k))
+            .ok_or_else(|| format!("netns:K takes a number of hosts from 1 to 16, not {k:?}")),
+    )
 }
 
 impl Drop for TestNet {

@@ -249,8 +249,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     )?;
     let mut ports = Ports::open(&run_id, &procs)?;
     let mut sup = Supervisor::default();
-    let epoch_margin_ns = 1_000_000_000 + 20_000_000 * procs.len() as u64;
-    let epoch = shoal_runtime::mono_ns() + epoch_margin_ns;
+    let epoch = shoal_runtime::mono_ns() + epoch_margin_ns(procs.len());
     let launch = Launch {
         bin_dir: opts.bin_dir.clone(),
         out: opts.out.clone(),
@@ -539,6 +538,11 @@ pub(crate) fn inject(
     );
 }
 
+/// How far ahead a realtime run's epoch lies: time for `processes` to start.
+pub(crate) fn epoch_margin_ns(processes: usize) -> u64 {
+    1_000_000_000 + 20_000_000 * processes as u64
+}
+
 fn realtime(
     opts: &RunOptions,
     ports: &mut Ports,
@@ -574,21 +578,7 @@ fn realtime(
             .context("waitset")?;
         check_signal(r)?;
         let t_s = now.saturating_sub(epoch) as f64 * 1e-9;
-        ports.recovery.track_truths();
-        for d in sup.reap() {
-            ports.handle_death(d, procs, sup, t_s)?;
-        }
-        // Restarted processes report ready (they run on their own clock).
-        let n = procs.len();
-        let mut ready = Vec::new();
-        let _ = ports.done.try_wait(|ev| {
-            if let Some(i) = ev.id.as_value().checked_sub(n).filter(|i| *i < n) {
-                ready.push(i);
-            }
-        });
-        for i in ready {
-            ports.recovery.ready(i, procs, &mut ports.journal, t_s);
-        }
+        ports.keep_realtime(procs, sup, t_s)?;
         if now > epoch {
             bar.set_position((now - epoch) / 1_000_000_000);
         }
@@ -631,6 +621,33 @@ impl Tally {
 }
 
 impl Ports {
+    /// What a realtime loop does between its waits, at time `t_s` of the
+    /// run: truths kept for a restart, deaths handled by the supervision
+    /// policy, restarted processes' ready reports taken (they run on their
+    /// own clock).
+    pub(crate) fn keep_realtime(
+        &mut self,
+        procs: &[ProcessSpec],
+        sup: &mut Supervisor,
+        t_s: f64,
+    ) -> anyhow::Result<()> {
+        self.recovery.track_truths();
+        for d in sup.reap() {
+            self.handle_death(d, procs, sup, t_s)?;
+        }
+        let n = procs.len();
+        let mut ready = Vec::new();
+        let _ = self.done.try_wait(|ev| {
+            if let Some(i) = ev.id.as_value().checked_sub(n).filter(|i| *i < n) {
+                ready.push(i);
+            }
+        });
+        for i in ready {
+            self.recovery.ready(i, procs, &mut self.journal, t_s);
+        }
+        Ok(())
+    }
+
     /// A process died at simulated time `t_s`: the supervision policy
     /// restarts it, or the run stops with the cause.
     pub(crate) fn handle_death(

@@ -45,6 +45,18 @@ fn signal_name(s: i32) -> &'static str {
     }
 }
 
+/// Moves the calling thread into the network namespace `ns` (an open
+/// `/var/run/netns/NAME` or `/proc/.../ns/net`); threads and processes it
+/// starts afterwards are born there.
+pub fn enter_netns(ns: &std::fs::File) -> std::io::Result<()> {
+    use std::os::fd::AsRawFd;
+    // SAFETY: setns only reads the descriptor, which `ns` keeps open.
+    if unsafe { libc::setns(ns.as_raw_fd(), libc::CLONE_NEWNET) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}
+
 /// Makes the child receive SIGTERM if the orchestrator dies, so no
 /// process outlives its run.
 pub fn die_with_parent(cmd: &mut Command) {
