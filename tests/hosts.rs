@@ -230,16 +230,16 @@ fn a_link_cut_past_the_lease_stops_every_host_cleanly_with_the_cause_named() {
     assert!(log.contains("the coordinator is gone"), "{log}");
 }
 
-/// `shoal run --quiet --mode MODE SCENARIO --hosts HOSTS --out OUT` in the
-/// coordinator's namespace, to its end; panics with the agents' logs if it
-/// fails.
-fn run_over_hosts(net: &TestNet, dir: &Path, mode: &str, scenario: &Path, out: &Path) {
+/// `shoal run --quiet --mode MODE SCENARIO --hosts DIR/HOSTS --out OUT` in
+/// the coordinator's namespace, to its end; panics with the agents' logs if
+/// it fails.
+fn run_over_hosts(net: &TestNet, dir: &Path, hosts: &str, mode: &str, scenario: &Path, out: &Path) {
     let o = net
         .in_ctl(&bin_dir().join("shoal"))
         .args(["run", "--quiet", "--mode", mode])
         .arg(scenario)
         .arg("--hosts")
-        .arg(dir.join("hosts.toml"))
+        .arg(dir.join(hosts))
         .arg("--out")
         .arg(out)
         .output()
@@ -258,12 +258,16 @@ fn run_over_hosts(net: &TestNet, dir: &Path, mode: &str, scenario: &Path, out: &
 fn a_realtime_run_over_two_hosts_starts_every_host_at_one_epoch_and_the_agents_serve_on() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let (net, _) = net_with_agents(dir, 2);
+    // Three hosts up; the first runs use two of them.
+    let (net, _) = net_with_agents(dir, 3);
+    let mut two = net.hosts_file();
+    two.hosts.truncate(2);
+    std::fs::write(dir.join("two.toml"), toml::to_string(&two).unwrap()).unwrap();
     let text = std::fs::read_to_string(repo_root().join("scenarios/paper.toml")).unwrap();
     let text = text.replacen("duration_s = ", "duration_s = 8.0\n# was: ", 1);
     let sc = write_scenario(dir, "paper8.toml", &text);
     let out = dir.join("rt");
-    run_over_hosts(&net, dir, "realtime", &sc, &out);
+    run_over_hosts(&net, dir, "two.toml", "realtime", &sc, &out);
     let s = summary(&out);
     assert_eq!(s["mode"], "realtime");
     // Every process of both hosts ran on the one clock: each stepped at
@@ -316,13 +320,25 @@ fn a_realtime_run_over_two_hosts_starts_every_host_at_one_epoch_and_the_agents_s
         let d = ((t[0] - w[0]).powi(2) + (t[1] - w[1]).powi(2) + (t[2] - w[2]).powi(2)).sqrt();
         assert!(d < 3.0, "{name}: the world has it {d:.2} m from its truth");
     }
-    for h in 0..2 {
+    for h in 0..3 {
         assert_eq!(net.others_on(h), Vec::<i32>::new(), "orphans on h{}", h + 1);
         assert_eq!(net.shm_files(h).unwrap(), Vec::<PathBuf>::new());
     }
-    // The same agents serve the next runs, lockstep then realtime again.
+    // The same agents serve the next runs, lockstep then realtime again,
+    // the last over all three hosts: a host that served runs before meets
+    // a new coordinator beside one that never did.
     let short = write_scenario(dir, "short.toml", &small_scenario("short", 4.0));
-    run_over_hosts(&net, dir, "lockstep", &short, &dir.join("ls"));
-    run_over_hosts(&net, dir, "realtime", &short, &dir.join("rt2"));
-    assert!(dir.join("rt2/recording.mcap").is_file());
+    run_over_hosts(&net, dir, "two.toml", "lockstep", &short, &dir.join("ls"));
+    run_over_hosts(
+        &net,
+        dir,
+        "hosts.toml",
+        "realtime",
+        &short,
+        &dir.join("rt3"),
+    );
+    let rt3: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("rt3/hosts.json")).unwrap())
+            .unwrap();
+    assert_eq!(rt3["hosts"].as_array().map(Vec::len), Some(3), "{rt3}");
 }

@@ -48,30 +48,74 @@ pub fn serve(opts: &AgentOptions) -> anyhow::Result<()> {
     }
     // Installs the SIGINT/SIGTERM handler before anything else runs.
     let _ = launch::termination_requested();
-    let session = zenoh::open(wire::agent_config(&opts.listen)?)
-        .wait()
-        .map_err(|e| anyhow::anyhow!("cannot open a Zenoh session on {:?}: {e}", opts.listen))?;
+    let mut finished: Option<Finished> = None;
+    let mut first = true;
+    loop {
+        match serve_session(opts, &mut finished, first)? {
+            Served::Stop => return Ok(()),
+            Served::Collected if opts.once => return Ok(()),
+            Served::Collected => first = false,
+        }
+    }
+}
+
+/// How a session of [`serve`] ended.
+enum Served {
+    /// On a signal.
+    Stop,
+    /// A run was collected.
+    Collected,
+}
+
+/// Opens a Zenoh session on the agent's endpoints, retrying for a while if
+/// the last one's listener is not gone yet.
+fn open_session(opts: &AgentOptions) -> anyhow::Result<zenoh::Session> {
+    let start = Instant::now();
+    loop {
+        match zenoh::open(wire::agent_config(&opts.listen)?).wait() {
+            Ok(s) => return Ok(s),
+            Err(e) if start.elapsed() < Duration::from_secs(5) => {
+                tracing::debug!("Zenoh session on {:?}: {e}; again", opts.listen);
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            Err(e) => anyhow::bail!("cannot open a Zenoh session on {:?}: {e}", opts.listen),
+        }
+    }
+}
+
+/// Serves on one Zenoh session until a run has been collected (every run
+/// after it gets a fresh session: a Zenoh router keeps a link-state graph
+/// of the routers it met, and after one coordinator left and another came,
+/// an agent's declarations sometimes no longer reached the new one, as
+/// seen with Zenoh 1.10 in `shoal bench hosts`), or a signal.
+fn serve_session(
+    opts: &AgentOptions,
+    finished: &mut Option<Finished>,
+    first: bool,
+) -> anyhow::Result<Served> {
+    let session = open_session(opts)?;
     // The queryable first: a coordinator that sees the token may ask at once.
     let queries = session
         .declare_queryable(wire::agent_queries(&opts.name))
         .wait()
         .map_err(|e| anyhow::anyhow!("queryable: {e}"))?;
-    let _alive = session
+    let alive = session
         .liveliness()
         .declare_token(wire::alive(&opts.name))
         .wait()
         .map_err(|e| anyhow::anyhow!("liveliness token: {e}"))?;
-    tracing::info!(name = %opts.name, listen = ?opts.listen, "host agent ready");
-    eprintln!(
-        "shoal host {} listening on {}",
-        opts.name,
-        opts.listen.join(", ")
-    );
-    let mut finished: Option<Finished> = None;
-    loop {
+    if first {
+        tracing::info!(name = %opts.name, listen = ?opts.listen, "host agent ready");
+        eprintln!(
+            "shoal host {} listening on {}",
+            opts.name,
+            opts.listen.join(", ")
+        );
+    }
+    let served = loop {
         if launch::termination_requested().is_some() {
             tracing::info!("host agent stopping on a signal");
-            break;
+            break Served::Stop;
         }
         let query = match queries.recv_timeout(Duration::from_millis(200)) {
             Ok(Some(q)) => q,
@@ -93,7 +137,7 @@ pub fn serve(opts: &AgentOptions) -> anyhow::Result<()> {
                     if let Some(old) = finished.take() {
                         tracing::warn!(run = %old.run_id, "a run was never collected; its files stay in {}", old.out.display());
                     }
-                    finished = Some(run_share(&session, opts, order, query));
+                    *finished = Some(run_share(&session, opts, order, query));
                 }
                 Err(e) => {
                     let _ = query.reply_err(format!("{e:#}")).wait();
@@ -107,12 +151,10 @@ pub fn serve(opts: &AgentOptions) -> anyhow::Result<()> {
                     }
                     drop(query);
                     let _ = std::fs::remove_dir_all(&f.out);
-                    if opts.once {
-                        break;
-                    }
+                    break Served::Collected;
                 }
                 other => {
-                    finished = other;
+                    *finished = other;
                     let _ = query
                         .reply_err(format!("host {} has no finished run {run}", opts.name))
                         .wait();
@@ -121,8 +163,13 @@ pub fn serve(opts: &AgentOptions) -> anyhow::Result<()> {
         } else {
             let _ = query.reply_err(format!("unknown query {key}")).wait();
         }
-    }
-    Ok(())
+    };
+    drop((alive, queries));
+    session
+        .close()
+        .wait()
+        .map_err(|e| anyhow::anyhow!("closing the Zenoh session: {e}"))?;
+    Ok(served)
 }
 
 /// Replies to `finish`: the outcome, then every file in pieces.
