@@ -9,7 +9,7 @@
 //!    put on Zenoh, received, written into iceoryx2 on the other host and
 //!    read there, and back the same way), and raw Zenoh on a direct link
 //!    between the two for reference. One-way latency is half the round
-//!    trip; the modes alternate (A B A B) so a ratio holds on a busy
+//!    trip; the modes alternate (A B C A B C ...) so a ratio holds on a busy
 //!    machine. Sizes: a truth (232 B) and the world of `--vehicles`.
 //! 2. **The lockstep tick**: the paper scenario (`--tick-duration` s) on one
 //!    host as `shoal run` runs it, and over 1, 2 and 4 agents: real-time
@@ -41,9 +41,17 @@ use crate::launch;
 /// `shoal bench hosts`.
 #[derive(Debug, clap::Args)]
 pub struct HostsBenchCmd {
-    /// Round trips per mode and size (split over two alternations).
-    #[arg(long, default_value_t = 2000)]
+    /// Round trips per mode and size (split over the alternations).
+    #[arg(long, default_value_t = 4000)]
     rounds: usize,
+    /// Times each mode of the hop runs, interleaved (A B C A B C ...).
+    #[arg(long, default_value_t = 8)]
+    alternations: usize,
+    /// Let idle CPUs sleep during the hop (by default the bench holds
+    /// `/dev/cpu_dma_latency` at 0, as cyclictest does, so that a wake-up
+    /// from a halted virtual CPU does not swamp the hop).
+    #[arg(long)]
+    idle_sleep: bool,
     /// Simulated seconds of the paper scenario for the tick's cost.
     #[arg(long, default_value_t = 60.0, value_parser = crate::cli::parse_duration)]
     tick_duration: f64,
@@ -60,6 +68,9 @@ pub struct HostsBenchCmd {
     /// Skip the large group (the hop and the tick only).
     #[arg(long)]
     skip_large: bool,
+    /// The hop only (no runs).
+    #[arg(long)]
+    hop_only: bool,
     /// Output directory (default: runs/bench-hosts-<unix time>).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -199,19 +210,42 @@ impl<T: Sample> Ends<T> {
         }
     }
 
-    /// What arrived, as a reader on this host sees it (shoal: through iceoryx2).
-    fn arrive(&mut self, index: usize, bytes: Vec<u8>) -> anyhow::Result<Vec<u8>> {
+    /// Takes what arrived as a reader on this host does (shoal: through
+    /// iceoryx2) and returns its round; with `echo`, sends it back as it
+    /// came (shoal: from the taken sample into a loaned one, as a process
+    /// that answers would).
+    fn arrive(&mut self, index: usize, bytes: Vec<u8>, echo: bool) -> anyhow::Result<Option<u64>> {
         match self {
-            Ends::Raw { .. } => Ok(bytes),
+            Ends::Raw { .. } => {
+                let round = round_of(&bytes);
+                if echo {
+                    self.send(0, 0, Some(&bytes))?;
+                }
+                Ok(round)
+            }
             Ends::Shoal {
-                bridge, subscriber, ..
+                bridge,
+                subscriber,
+                publisher,
+                ..
             } => {
                 bridge.receive(index, &bytes)?;
-                let mut got = Vec::new();
+                let mut round = None;
+                let mut sent = Ok(());
                 subscriber.take_ready_in_place(&shoal_runtime::StepContext::any_time(), |v| {
-                    got = wire::trim(bytemuck::bytes_of(v)).to_vec();
+                    let got = bytemuck::bytes_of(v);
+                    round = round_of(got);
+                    if echo {
+                        sent = publisher.publish_stamped_in_place(|t| {
+                            bytemuck::bytes_of_mut(t).copy_from_slice(got);
+                        });
+                    }
                 })?;
-                Ok(got)
+                sent?;
+                if echo {
+                    bridge.forward()?;
+                }
+                Ok(round)
             }
         }
     }
@@ -267,17 +301,22 @@ fn hop<T: Sample>(
                 rate_hz: 0.0,
             };
             let crossings = [crossing(PING, 0), crossing(PONG, 1)];
+            // The services are sized for the readers they have (the
+            // bridge and the reader here), as a run sizes its own: a world
+            // sized for 200 vehicles has 400 reader slots, which iceoryx2
+            // scans on every publish, on one host as on several.
+            let readers = 1;
             let bridge = Bridge::open(
                 session,
                 &node,
                 &crossings,
                 usize::from(!ping_side),
-                200,
+                readers,
                 &[],
                 &tx,
             )?;
             let limits = if what == "world" {
-                shoal_runtime::ChannelLimits::world(200)
+                shoal_runtime::ChannelLimits::world(readers)
             } else {
                 shoal_runtime::ChannelLimits::vehicle()
             };
@@ -298,8 +337,7 @@ fn hop<T: Sample>(
         loop {
             match rx.recv_timeout(Duration::from_millis(50)) {
                 Ok(Inbound::Sample { index, bytes }) => {
-                    let got = ends.arrive(index, bytes)?;
-                    ends.send(0, cmd.size, Some(&got))?;
+                    ends.arrive(index, bytes, true)?;
                 }
                 Ok(_) => {}
                 Err(RecvTimeoutError::Timeout) => {
@@ -319,7 +357,7 @@ fn hop<T: Sample>(
         loop {
             match rx.recv_timeout(Duration::from_millis(200)) {
                 Ok(Inbound::Sample { index, bytes }) => {
-                    if round_of(&ends.arrive(index, bytes)?) == Some(r) {
+                    if ends.arrive(index, bytes, false)? == Some(r) {
                         break;
                     }
                 }
@@ -339,6 +377,18 @@ fn hop<T: Sample>(
     drop(ends);
     println!("{}", json!({ "one_way_ns": one_way_ns }));
     Ok(())
+}
+
+/// Asks the kernel to keep CPUs out of idle states deeper than polling
+/// while the returned file is open (PM QoS; `None` if it cannot).
+fn hold_cpu_latency() -> Option<std::fs::File> {
+    use std::io::Write;
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/cpu_dma_latency")
+        .ok()?;
+    f.write_all(&0i32.to_ne_bytes()).ok()?;
+    Some(f)
 }
 
 /// A percentile of `v` (sorted in place), µs.
@@ -538,6 +588,19 @@ pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
     );
     let world = world_wire_bytes(cmd.vehicles.min(ipc_types::MAX_VEHICLES));
     let mut hops = Vec::new();
+    let qos = if cmd.idle_sleep {
+        None
+    } else {
+        hold_cpu_latency()
+    };
+    println!(
+        "  (idle CPUs {} during the hop)",
+        if qos.is_some() {
+            "poll: /dev/cpu_dma_latency held at 0"
+        } else {
+            "may sleep"
+        }
+    );
     let hop_dir = out.join("hop");
     std::fs::create_dir_all(&hop_dir)?;
     let modes = [
@@ -545,21 +608,32 @@ pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
         ("shoal, via router", HopMode::Shoal, false),
         ("zenoh, direct link", HopMode::Raw, true),
     ];
+    let mut ratios_out = Vec::new();
     for size in [232usize, world] {
         let mut all: Vec<Vec<f64>> = vec![Vec::new(); modes.len()];
-        // A B A B: each mode twice, interleaved.
-        for _ in 0..2 {
+        // A B C A B C ...: each mode in turn, so that a drift of the
+        // machine falls on all alike.
+        let alternations = cmd.alternations.max(1);
+        // Shoal's p50 over raw Zenoh's, per alternation (side by side).
+        let mut ratios = Vec::with_capacity(alternations);
+        for _ in 0..alternations {
+            let mut p50_here = [f64::NAN; 2];
             for (i, (_, mode, direct)) in modes.iter().enumerate() {
-                all[i].extend(measure_hop(
+                let mut v = measure_hop(
                     &net,
                     &bin,
                     &hop_dir,
                     *mode,
                     *direct,
                     size,
-                    cmd.rounds / 2,
-                )?);
+                    (cmd.rounds / alternations).max(1),
+                )?;
+                all[i].extend_from_slice(&v);
+                if i < 2 {
+                    p50_here[i] = pct_us(&mut v, 0.5);
+                }
             }
+            ratios.push(p50_here[1] / p50_here[0]);
         }
         let mut p50 = Vec::new();
         for (i, (name, _, _)) in modes.iter().enumerate() {
@@ -577,12 +651,29 @@ pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
                 json!({ "bytes": size, "mode": name, "p50_us": a, "p99_us": b, "mean_us": mean }),
             );
         }
+        let pooled = p50[1] / p50[0];
+        let median = pct_us(&mut ratios, 0.5) * 1e3;
         println!(
-            "  {size:>8}  shoal / zenoh via the same router: {} (p50)",
-            fmt_num(p50[1] / p50[0])
+            "  {size:>8}  shoal / zenoh via the same router: {} (p50 of all), median of the {alternations} side-by-side ratios {} (range {} - {})",
+            fmt_num(pooled),
+            fmt_num(median),
+            fmt_num(ratios.first().copied().unwrap_or(f64::NAN)),
+            fmt_num(ratios.last().copied().unwrap_or(f64::NAN)),
         );
+        ratios_out.push(json!({ "bytes": size, "pooled_p50_ratio": pooled, "median_ratio": median, "ratios": ratios }));
     }
+    report["hop_ratio"] = json!(ratios_out);
     report["hop"] = json!(hops);
+    report["hop_idle_poll"] = json!(qos.is_some());
+    drop(qos);
+    if cmd.hop_only {
+        std::fs::write(
+            out.join("hosts.json"),
+            serde_json::to_string_pretty(&report)?,
+        )?;
+        println!("\n{}", out.join("hosts.json").display());
+        return Ok(());
+    }
 
     // 2. The lockstep tick.
     net.start_agents(&bin, &out)?;
@@ -760,7 +851,14 @@ fn projection(report: &Value) -> Value {
         fmt_num(rtf),
         fmt_num(rtf * busy_ticks_per_s)
     );
+    let limit = format!(
+        "a world sample holds at most {} vehicles (ipc_types::MAX_VEHICLES): 1,000 need it raised to 1,024 (a {} kB sample) or the world split by region",
+        ipc_types::MAX_VEHICLES,
+        fmt_num((48.0 + 80.0 * 1024.0) / 1e3)
+    );
+    println!("  but {limit}");
     json!({
+        "limit": limit,
         "vehicles": n, "hosts": k,
         "host_down_bytes_per_s": down_bytes, "host_up_bytes_per_s": up_bytes,
         "router_out_bytes_per_s": router_out,

@@ -239,6 +239,13 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
         .map(|h| opts.out.join("parts").join(format!("{h}.mcap")))
         .filter(|p| p.is_file())
         .collect();
+    // What joining costs (the choice of one recorder per host joined at the
+    // end, against one recorder taking every channel over Zenoh).
+    let parts_bytes: Vec<u64> = parts
+        .iter()
+        .map(|p| std::fs::metadata(p).map_or(0, |m| m.len()))
+        .collect();
+    let join_start = Instant::now();
     let joined = if parts.is_empty() {
         Err(anyhow::anyhow!("no host sent a recording"))
     } else {
@@ -254,6 +261,7 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
                 let _ = std::fs::remove_dir_all(opts.out.join("parts"));
             })
     };
+    let join_s = join_start.elapsed().as_secs_f64();
     // What each host did, for users and `shoal bench hosts`.
     let per_host: Vec<serde_json::Value> = outcomes
         .iter()
@@ -297,6 +305,11 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
             "run_id": run_id,
             "mode": opts.mode.as_str(),
             "hosts": per_host,
+            "recording": {
+                "parts_bytes": parts_bytes,
+                "joined_bytes": std::fs::metadata(&recording).map_or(0, |m| m.len()),
+                "join_s": join_s,
+            },
             "clock": {
                 "method": CLOCK_METHOD,
                 "readings_per_host": CLOCK_READINGS,

@@ -426,3 +426,18 @@ impl Drop for TestNet {
         self.teardown();
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn netns_k_names_a_number_of_hosts_and_anything_else_is_a_file() {
+        assert_eq!(parse_local("netns:3"), Some(Ok(3)));
+        assert!(matches!(parse_local("netns:0"), Some(Err(_))));
+        assert!(matches!(parse_local("netns:17"), Some(Err(_))));
+        assert!(matches!(parse_local("netns:x"), Some(Err(_))));
+        assert_eq!(parse_local("hosts.toml"), None);
+        assert_eq!(parse_local("runs/netns.toml"), None);
+    }
+}
