@@ -379,6 +379,14 @@ fn hop<T: Sample>(
     Ok(())
 }
 
+/// An error once SIGINT or SIGTERM came.
+fn stop_if_asked() -> anyhow::Result<()> {
+    match launch::termination_requested() {
+        Some(sig) => Err(launch::RunError::Interrupted(sig).into()),
+        None => Ok(()),
+    }
+}
+
 /// Asks the kernel to keep CPUs out of idle states deeper than polling
 /// while the returned file is open (PM QoS; `None` if it cannot).
 fn hold_cpu_latency() -> Option<std::fs::File> {
@@ -563,6 +571,9 @@ fn hosts_file(net: &TestNet, k: usize, dir: &Path) -> anyhow::Result<PathBuf> {
 
 /// Runs the benchmark.
 pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
+    // Ctrl-C or SIGTERM ends the step under way, then the bench, so that
+    // the namespaces and their agents are removed.
+    let _ = launch::termination_requested();
     let bin = launch::bin_dir_or_default(cmd.bin_dir.clone())?;
     let secs = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -619,6 +630,7 @@ pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
         for _ in 0..alternations {
             let mut p50_here = [f64::NAN; 2];
             for (i, (_, mode, direct)) in modes.iter().enumerate() {
+                stop_if_asked()?;
                 let mut v = measure_hop(
                     &net,
                     &bin,
@@ -698,6 +710,7 @@ pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
         } else {
             Some(hosts_file(&net, k, &out)?)
         };
+        stop_if_asked()?;
         run_one(&net, &bin, &paper, hf.as_deref(), &dir)?;
         let f = run_figures(&dir, n_paper)?;
         let busy = crate::hosts::placement::lockstep_ticks_per_sim_s(&sc) * cmd.tick_duration;
@@ -752,6 +765,7 @@ pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
             } else {
                 Some(hosts_file(&net, k, &out)?)
             };
+            stop_if_asked()?;
             run_one(&net, &bin, &path, hf.as_deref(), &dir)?;
             let f = run_figures(&dir, cmd.vehicles)?;
             println!(
