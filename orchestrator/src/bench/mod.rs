@@ -5,4 +5,5 @@ pub mod hosts;
 pub mod ipc;
 pub mod run;
 pub mod scale;
+pub mod step;
 pub mod vision;

@@ -117,6 +117,10 @@ enum BenchCmd {
     /// Real-time factor and CPU time of a scenario in lockstep (blocking and
     /// adaptive waits), end-to-end latency in realtime mode.
     Run(bench::run::RunBenchCmd),
+    /// The runtime's CPU per lockstep step of each process kind and the
+    /// orchestrator's per tick, apart from what a process costs once (long
+    /// run minus short run); with --syscalls, system calls per step.
+    Step(bench::step::StepCmd),
     /// Cost against group size: N = 5, 25, 50, 100 in lockstep (processes,
     /// real-time factor, CPU per vehicle-second, memory, recorder rate).
     Scale(bench::scale::ScaleCmd),
@@ -164,6 +168,7 @@ pub fn main() -> ExitCode {
         Cmd::Bench(BenchCmd::Ipc(cmd)) => bench::ipc::run(cmd),
         Cmd::Bench(BenchCmd::Run(cmd)) => bench::run::run(cmd),
         Cmd::Bench(BenchCmd::Scale(cmd)) => bench::scale::run(cmd),
+        Cmd::Bench(BenchCmd::Step(cmd)) => bench::step::run(cmd),
         Cmd::Bench(BenchCmd::Vision(cmd)) => bench::vision::run(cmd),
         Cmd::Bench(BenchCmd::Hosts(cmd)) => bench::hosts::run(cmd),
         Cmd::Bench(BenchCmd::HopPeer(cmd)) => bench::hosts::hop_peer(cmd),
