@@ -538,9 +538,13 @@ impl<S: Service> Runtime<S> {
                     });
                     return CallbackProgression::Stop;
                 }
-                if spin_ns > 0 {
-                    spin_until = mono_ns() + spin_ns;
+                if spin_ns == 0 {
+                    // Blocking: the next wake-up comes after the orchestrator
+                    // has heard `done`, and the WaitSet (level-triggered)
+                    // sees it; polling for it here costs two system calls.
+                    return CallbackProgression::Continue;
                 }
+                spin_until = mono_ns() + spin_ns;
             }
         };
         let mut on_event = on_event;
@@ -702,6 +706,9 @@ pub fn open_wake<S: Service>(
         .max_notifiers(2)
         .max_listeners(2)
         .max_nodes(4)
+        // One event id (0): a listener's every wait then resets one
+        // counter, not iceoryx2's default of 256.
+        .event_id_max_value(0)
         .open_or_create()
         .map_err(|e| RuntimeError::Service {
             service: name,
