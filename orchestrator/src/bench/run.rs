@@ -317,9 +317,9 @@ fn render_realtime(s: &Summary) -> String {
 }
 
 /// The output directory of every run; removed when dropped unless kept.
-struct Scratch {
-    path: PathBuf,
-    keep: bool,
+pub(super) struct Scratch {
+    pub(super) path: PathBuf,
+    pub(super) keep: bool,
 }
 
 impl Drop for Scratch {

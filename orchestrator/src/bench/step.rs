@@ -17,7 +17,7 @@ use anyhow::Context;
 use shoal_runtime::Mode;
 use shoal_scenario::{ProcessKind, Scenario};
 
-use super::run::fmt_num;
+use super::run::{fmt_num, Scratch};
 use crate::analysis::summary::Summary;
 use crate::cli::ProcessArgs;
 use crate::launch::{self, os as sys};
@@ -100,22 +100,6 @@ fn median(v: &mut [f64]) -> f64 {
         0 => f64::NAN,
         n if n % 2 == 1 => v[n / 2],
         n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
-    }
-}
-
-/// Removes the bench's directory unless asked to keep it.
-struct Scratch {
-    path: PathBuf,
-    keep: bool,
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        if self.keep {
-            eprintln!("runs kept in {}", self.path.display());
-        } else {
-            let _ = std::fs::remove_dir_all(&self.path);
-        }
     }
 }
 
