@@ -530,19 +530,24 @@ fn graph_of(
     let run = wait_run_json(&out, Duration::from_secs(20));
     let run_id = run["run_id"].as_str().unwrap().to_string();
     let start = Instant::now();
+    // A process opens its services one after another: take the graph once
+    // every node has some and two reads 250 ms apart agree (a read between
+    // two opens would miss the later one).
+    let mut last = BTreeMap::new();
     let graph = loop {
         let g = live_graph(&run_id);
         let ready = nodes
             .iter()
             .all(|n| g.get(*n).is_some_and(|s| s.len() >= 4));
-        if ready {
+        if ready && g == last {
             break g;
         }
+        last = g;
         assert!(
             start.elapsed() < Duration::from_secs(20),
-            "nodes never appeared: {g:?}"
+            "nodes never appeared: {last:?}"
         );
-        std::thread::sleep(Duration::from_millis(50));
+        std::thread::sleep(Duration::from_millis(if ready { 250 } else { 50 }));
     };
     signal(child.id(), libc::SIGINT);
     child.wait().unwrap();
