@@ -84,11 +84,22 @@
 //! [`MpcError::Solver`]. Clarabel keeps its own internal timers; this crate reads no clock
 //! and sets no time limit (the process measures the solve time).
 //!
+//! ## Unconstrained first
+//! The QP is strictly convex (`ρ₂ > 0` makes the Hessian positive definite) and its only
+//! constraints are the bounds. So each step first factorises the dense `6M × 6M` Hessian
+//! (Cholesky, in place, no allocation) and solves for the unconstrained minimiser; if that
+//! lies within every bound it is the QP's exact solution ([`MpcStatus::Unconstrained`],
+//! zero iterations) and clarabel is not called. Only steps with an active bound go to
+//! clarabel. On the library's closed loop 96 % of the steps take the shortcut (`cargo bench
+//! -p mpc --bench mpc` prints the table); `unconstrained_first = false` calls clarabel on
+//! every step.
+//!
 //! ## Fallback
 //! [`Mpc::fallback`] multiplies the previously applied input by `fallback_decay` (per call)
 //! and returns it: finite and within bounds by construction, decaying to zero.
 #![forbid(unsafe_code)]
 
+pub mod closed_loop;
 pub mod node;
 pub mod prediction;
 
@@ -96,7 +107,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
 };
-use nalgebra::{Matrix6, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Matrix6, UnitQuaternion, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 use sim_plant::model::Vehicle;
 
@@ -212,6 +223,11 @@ pub struct MpcConfig {
     pub fallback_decay: f64,
     /// Clarabel iteration limit. Default 50.
     pub max_iter: u32,
+    /// Solve the unconstrained problem first (one Cholesky factorisation of the 6M × 6M
+    /// Hessian) and take its minimiser when it lies within every bound: the QP is strictly
+    /// convex, so a feasible unconstrained minimiser is its exact solution. Clarabel solves
+    /// the steps where some bound is active. Default true; false always calls clarabel.
+    pub unconstrained_first: bool,
 }
 
 impl Default for MpcConfig {
@@ -228,6 +244,7 @@ impl Default for MpcConfig {
             terminal_weight: 30.0,
             fallback_decay: 0.8,
             max_iter: 50,
+            unconstrained_first: true,
         }
     }
 }
@@ -331,6 +348,9 @@ pub enum MpcStatus {
     Solved,
     /// Solved to reduced accuracy (still applied).
     AlmostSolved,
+    /// The unconstrained minimiser already satisfies every bound, so it is the QP's exact
+    /// solution (see [`MpcConfig::unconstrained_first`]); clarabel was not called.
+    Unconstrained,
 }
 
 impl MpcStatus {
@@ -341,6 +361,7 @@ impl MpcStatus {
         match self {
             Self::Solved => 0,
             Self::AlmostSolved => 1,
+            Self::Unconstrained => 2,
         }
     }
 }
@@ -382,6 +403,10 @@ pub struct Mpc {
     p_vals: Vec<f64>,
     q_vals: Vec<f64>,
     b_vals: Vec<f64>,
+    /// The dense Hessian `P` for the unconstrained solve (factorised in place, kept across
+    /// steps so that no step allocates) and its right-hand side / solution.
+    dense: DMatrix<f64>,
+    x_free: DVector<f64>,
 }
 
 impl std::fmt::Debug for Mpc {
@@ -465,6 +490,8 @@ impl Mpc {
             p_vals: vec![0.0; nnz],
             q_vals: vec![0.0; n],
             b_vals: vec![0.0; 2 * n],
+            dense: DMatrix::zeros(n, n),
+            x_free: DVector::zeros(n),
         };
         // Equilibration is computed once, at construction: build the solver on the data of
         // a representative problem (at rest, level, target 1 m ahead) so its scaling fits.
@@ -669,6 +696,12 @@ impl Mpc {
             return Err(MpcError::NonFiniteInput("target"));
         }
         let constant = self.assemble(input)?;
+        if self.cfg.unconstrained_first && self.solve_unconstrained() {
+            let x = std::mem::replace(&mut self.x_free, DVector::zeros(0));
+            let out = self.finish(x.as_slice(), constant, 0, MpcStatus::Unconstrained);
+            self.x_free = x;
+            return out;
+        }
         let setup = |e: clarabel::solver::DataUpdateError| MpcError::Setup(e.to_string());
         self.solver.update_P(&self.p_vals).map_err(setup)?;
         self.solver.update_q(&self.q_vals).map_err(setup)?;
@@ -685,9 +718,59 @@ impl Mpc {
                 })
             }
         };
-        if !all_finite(&sol.x) {
+        let iterations = sol.iterations;
+        let x = std::mem::take(&mut self.solver.solution.x);
+        let out = self.finish(&x, constant, iterations, status);
+        self.solver.solution.x = x;
+        out
+    }
+
+    /// The minimiser of `½v̂ᵀPv̂ + qᵀv̂` into `x_free` (Cholesky of `P`, in place); true when
+    /// it satisfies every bound `A v̂ ≤ b`, i.e. when it is the QP's solution.
+    fn solve_unconstrained(&mut self) -> bool {
+        let n = self.q_vals.len();
+        let mut dense = std::mem::replace(&mut self.dense, DMatrix::zeros(0, 0));
+        let mut k = 0;
+        for c in 0..n {
+            for r in 0..=c {
+                dense[(r, c)] = self.p_vals[k];
+                dense[(c, r)] = self.p_vals[k];
+                k += 1;
+            }
+        }
+        for (x, q) in self.x_free.iter_mut().zip(&self.q_vals) {
+            *x = -q;
+        }
+        let feasible = match nalgebra::linalg::Cholesky::new(dense) {
+            Some(chol) => {
+                chol.solve_mut(&mut self.x_free);
+                self.dense = chol.unpack();
+                self.x_free
+                    .iter()
+                    .enumerate()
+                    .all(|(c, &x)| x.is_finite() && x <= self.b_vals[c] && -x <= self.b_vals[n + c])
+            }
+            None => {
+                // Not positive definite to working precision: leave it to clarabel.
+                self.dense = DMatrix::zeros(n, n);
+                false
+            }
+        };
+        feasible
+    }
+
+    /// Cost, applied input and the new previous input from the scaled solution `x`.
+    fn finish(
+        &mut self,
+        x: &[f64],
+        constant: f64,
+        iterations: u32,
+        status: MpcStatus,
+    ) -> Result<MpcOutput, MpcError> {
+        if !all_finite(x) {
             return Err(MpcError::NonFiniteSolution);
         }
+        let sol_x = x;
         // Cost (18) at the solution: v̂ᵀĤv̂ + 2ĝᵀv̂ + const = ½v̂ᵀPv̂ + qᵀv̂ + const.
         let n = NU * self.n_blocks;
         let mut cost = constant;
@@ -695,14 +778,14 @@ impl Mpc {
         for c in 0..n {
             for r in 0..=c {
                 let w = if r == c { 0.5 } else { 1.0 };
-                cost += w * self.p_vals[k] * sol.x[r] * sol.x[c];
+                cost += w * self.p_vals[k] * sol_x[r] * sol_x[c];
                 k += 1;
             }
-            cost += self.q_vals[c] * sol.x[c];
+            cost += self.q_vals[c] * sol_x[c];
         }
         let mut tau = Vector6::zeros();
         for c in 0..NU {
-            let u = self.u_prev[c] + self.umax[c] * sol.x[c];
+            let u = self.u_prev[c] + self.umax[c] * sol_x[c];
             tau[c] = u.clamp(-self.umax[c], self.umax[c]);
         }
         if !all_finite(tau.iter()) {
@@ -711,7 +794,7 @@ impl Mpc {
         self.u_prev = tau;
         Ok(MpcOutput {
             tau,
-            iterations: sol.iterations,
+            iterations,
             status,
             cost,
         })
@@ -907,5 +990,47 @@ mod tests {
             assert!(e.contains(key), "{e}");
         }
         assert!(MpcConfig::default().validate().is_ok());
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config::with_cases(64))]
+        /// Whatever the state and setpoint, the unconstrained-first path returns what
+        /// clarabel alone returns (to the solver's tolerance), and it takes the shortcut
+        /// only when its input is within every bound.
+        #[test]
+        fn unconstrained_first_returns_what_clarabel_returns(
+            roll in -0.3f64..0.3, pitch in -0.3f64..0.3,
+            u in -0.5f64..2.0, v in -0.5f64..0.5, r in -0.2f64..0.2,
+            x in -20.0f64..20.0, y in -10.0f64..10.0, z in -3.0f64..3.0,
+            yaw in -1.0f64..1.0, prev in -0.5f64..0.5,
+        ) {
+            let vehicle = Vehicle::new(&VehicleParams::default()).unwrap();
+            let input = MpcInput {
+                attitude: UnitQuaternion::from_euler_angles(roll, pitch, 0.0),
+                nu: Vector6::new(u, v, 0.0, 0.0, 0.0, r),
+                target: MpcTarget {
+                    position_m: Vector3::new(x, y, z),
+                    velocity_mps: Vector3::new(1.0, 0.0, 0.0),
+                    yaw_rel_rad: yaw,
+                },
+            };
+            let cfg = MpcConfig::default();
+            let mut fast = Mpc::new(&cfg, &vehicle).unwrap();
+            let mut slow = Mpc::new(&MpcConfig { unconstrained_first: false, ..cfg.clone() }, &vehicle).unwrap();
+            let u_prev = Vector6::from(cfg.thrust_max) * prev;
+            fast.u_prev = u_prev;
+            slow.u_prev = u_prev;
+            let a = fast.step(&input).unwrap();
+            let b = slow.step(&input).unwrap();
+            proptest::prop_assert_ne!(b.status, MpcStatus::Unconstrained);
+            for c in 0..NU {
+                let tol = 1e-4 * cfg.thrust_max[c];
+                proptest::prop_assert!((a.tau[c] - b.tau[c]).abs() <= tol,
+                    "axis {}: {} vs {} ({:?})", c, a.tau[c], b.tau[c], a.status);
+                if a.status == MpcStatus::Unconstrained {
+                    proptest::prop_assert!(a.tau[c].abs() <= cfg.thrust_max[c]);
+                }
+            }
+        }
     }
 }

@@ -4,33 +4,9 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use mpc::{Mpc, MpcConfig, MpcError, MpcInput, MpcTarget};
-use nalgebra::{Rotation3, UnitQuaternion, Vector3, Vector6};
-use sim_plant::nav::{NavConfig, NavSensor};
-use sim_plant::{Plant, PlantConfig, PlantState};
-
-/// The target in NED: position, velocity, heading at time t.
-fn target_at(t: f64) -> (Vector3<f64>, Vector3<f64>, f64) {
-    let speed = 1.0;
-    let start = Vector3::new(6.0, 2.0, 11.0);
-    let t_turn = 30.0;
-    if t < t_turn {
-        (
-            start + Vector3::new(speed * t, 0.0, 0.0),
-            Vector3::new(speed, 0.0, 0.0),
-            0.0,
-        )
-    } else {
-        // Then a starboard turn on a 40 m circle, descending at 0.1 m/s.
-        let radius = 40.0;
-        let w = speed / radius;
-        let a = w * (t - t_turn);
-        let centre = start + Vector3::new(speed * t_turn, radius, 0.0);
-        let p = centre + Vector3::new(radius * a.sin(), -radius * a.cos(), 0.1 * (t - t_turn));
-        let v = Vector3::new(speed * a.cos(), speed * a.sin(), 0.1);
-        (p, v, a)
-    }
-}
+use mpc::closed_loop::{self, target_at, wrap};
+use mpc::{Mpc, MpcConfig, MpcError, MpcInput, MpcStatus, MpcTarget};
+use nalgebra::{UnitQuaternion, Vector3, Vector6};
 
 struct Run {
     /// Position error after the initial transient, m (per control step).
@@ -58,40 +34,9 @@ impl Run {
     }
 }
 
-fn wrap(a: f64) -> f64 {
-    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
-}
-
-/// Uniform pseudo-random numbers with standard deviation `sigma` (deterministic).
-struct Noise(u64);
-
-impl Noise {
-    fn next(&mut self, sigma: f64) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        ((self.0 >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 12f64.sqrt() * sigma
-    }
-}
-
 /// Runs the loop; `target_noise_m` adds white noise to the target position, as an observer
 /// of the parent's pose from vision would leave.
 fn run(cfg: &MpcConfig, duration_s: f64, transient_s: f64, target_noise_m: f64) -> Run {
-    let mut noise = Noise(12345);
-    let plant_cfg = PlantConfig {
-        current_ned_mps: [0.1, -0.05, 0.0],
-        ..PlantConfig::default()
-    };
-    let mut plant = Plant::new(
-        &plant_cfg,
-        PlantState::at_rest(Vector3::new(0.0, 0.0, 10.0), UnitQuaternion::identity()),
-    )
-    .unwrap();
-    let mut nav = NavSensor::new(&NavConfig::default(), 11).unwrap();
-    let mut mpc = Mpc::new(cfg, plant.vehicle()).unwrap();
-    let dt = cfg.step_s;
-    let steps = (duration_s / dt).round() as usize;
     let mut out = Run {
         errors_after_transient: Vec::new(),
         heading_errors_after_transient: Vec::new(),
@@ -99,64 +44,39 @@ fn run(cfg: &MpcConfig, duration_s: f64, transient_s: f64, target_noise_m: f64) 
         failures: 0,
         max_iterations: 0,
     };
-    for k in 0..steps {
-        let t = k as f64 * dt;
-        let truth = *plant.state();
-        let m = nav.measure(&truth, false);
-        let (p_t, v_t, psi_t) = target_at(t);
-        // The planner's job, done here from the true relative position (the planner's
-        // observer gives a smooth estimate) and the vehicle's own noisy heading: express
-        // the target in the level frame.
-        let (_, _, psi) = m.attitude.euler_angles();
-        let to_level = Rotation3::from_axis_angle(&Vector3::z_axis(), -psi);
-        let pos = truth.position_ned_m;
-        let target = MpcTarget {
-            position_m: to_level * (p_t - pos)
-                + Vector3::from_fn(|_, _| noise.next(target_noise_m)),
-            velocity_mps: to_level * v_t,
-            yaw_rel_rad: wrap(psi_t - psi),
-        };
-        let mut nu = Vector6::zeros();
-        nu.fixed_rows_mut::<3>(0).copy_from(&m.velocity_body_mps);
-        nu.fixed_rows_mut::<3>(3).copy_from(&m.rates_body_radps);
-        let input = MpcInput {
-            attitude: m.attitude,
-            nu,
-            target,
-        };
-        let tau = match mpc.step(&input) {
+    let dt = cfg.step_s;
+    closed_loop::run(cfg, duration_s, target_noise_m, |s| {
+        match s.result {
             Ok(o) => {
                 out.max_iterations = out.max_iterations.max(o.iterations);
                 assert!(o.cost.is_finite() && o.cost >= -1e-6, "cost {}", o.cost);
-                o.tau
             }
-            Err(_) => {
-                out.failures += 1;
-                mpc.fallback()
-            }
-        };
+            Err(_) => out.failures += 1,
+        }
+        let tau = s.tau;
         for i in 0..6 {
             assert!(
                 tau[i].is_finite() && tau[i].abs() <= cfg.thrust_max[i] + 1e-9,
-                "step {k}: tau[{i}] = {} beyond ±{}",
+                "step {}: tau[{i}] = {} beyond ±{}",
+                s.k,
                 tau[i],
                 cfg.thrust_max[i]
             );
         }
-        plant.advance(&tau, dt).unwrap();
         // The plant never had to saturate what the MPC asked for.
-        assert_eq!(*plant.applied_tau(), tau);
-        if t >= transient_s {
+        assert_eq!(*s.plant.applied_tau(), tau);
+        if s.t >= transient_s {
             out.taus.push(tau);
-            let s = plant.state();
-            let (p_t, _, psi_t) = target_at(t + dt);
+            let st = s.plant.state();
+            let (p_t, _, psi_t) = target_at(s.t + dt);
             out.errors_after_transient
-                .push((s.position_ned_m - p_t).norm());
-            let (_, _, psi) = s.euler_rpy();
+                .push((st.position_ned_m - p_t).norm());
+            let (_, _, psi) = st.euler_rpy();
             out.heading_errors_after_transient
                 .push(wrap(psi_t - psi).abs());
         }
-    }
+    })
+    .unwrap();
     out
 }
 
@@ -187,6 +107,43 @@ fn tracks_a_moving_turning_target_with_bounded_error_and_bounded_thrust() {
         .copied()
         .fold(0.0, f64::max);
     assert!(max_heading < 0.1, "max heading error {max_heading} rad");
+}
+
+/// The unconstrained-first path changes nothing but the time: the same loop with clarabel
+/// on every step applies the same inputs (to the solver's tolerance) and tracks the same.
+#[test]
+fn unconstrained_first_tracks_as_clarabel_alone() {
+    let fast = MpcConfig::default();
+    let slow = MpcConfig {
+        unconstrained_first: false,
+        ..fast.clone()
+    };
+    let (a, b) = (run(&fast, 70.0, 20.0, 0.05), run(&slow, 70.0, 20.0, 0.05));
+    let mut shortcut = 0usize;
+    closed_loop::run(&fast, 70.0, 0.05, |s| {
+        if matches!(s.result, Ok(o) if o.status == MpcStatus::Unconstrained) {
+            shortcut += 1;
+        }
+    })
+    .unwrap();
+    let max_dtau = a
+        .taus
+        .iter()
+        .zip(&b.taus)
+        .map(|(x, y)| (x - y).abs().max())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "unconstrained on {shortcut} of 700 steps; max err {:.4} / {:.4} m; max |Δτ| {max_dtau:.2e}",
+        a.max_error(),
+        b.max_error()
+    );
+    assert!(shortcut > 0, "the shortcut never applied");
+    assert!(
+        shortcut < 700,
+        "no step had an active bound: the test shows nothing of clarabel"
+    );
+    assert!((a.max_error() - b.max_error()).abs() <= 0.05 * b.max_error());
+    assert!(max_dtau < 1e-2, "inputs differ by {max_dtau} N");
 }
 
 #[test]
