@@ -387,18 +387,6 @@ fn stop_if_asked() -> anyhow::Result<()> {
     }
 }
 
-/// Asks the kernel to keep CPUs out of idle states deeper than polling
-/// while the returned file is open (PM QoS; `None` if it cannot).
-fn hold_cpu_latency() -> Option<std::fs::File> {
-    use std::io::Write;
-    let mut f = std::fs::OpenOptions::new()
-        .write(true)
-        .open("/dev/cpu_dma_latency")
-        .ok()?;
-    f.write_all(&0i32.to_ne_bytes()).ok()?;
-    Some(f)
-}
-
 /// A percentile of `v` (sorted in place), µs.
 fn pct_us(v: &mut [f64], p: f64) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -602,7 +590,7 @@ pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
     let qos = if cmd.idle_sleep {
         None
     } else {
-        hold_cpu_latency()
+        launch::os::hold_cpu_latency()
     };
     println!(
         "  (idle CPUs {} during the hop)",

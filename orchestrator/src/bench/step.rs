@@ -45,6 +45,11 @@ pub struct StepCmd {
     /// Keep the runs' directories (under /tmp) and print where.
     #[arg(long)]
     pub keep: bool,
+    /// Keep idle CPUs polling during the runs (`/dev/cpu_dma_latency` held
+    /// at 0, as cyclictest does): a wake-up then needs no interrupt to a
+    /// halted CPU, which on a virtual machine is most of its cost.
+    #[arg(long)]
+    pub idle_poll: bool,
     #[command(flatten)]
     pub processes: ProcessArgs,
 }
@@ -124,6 +129,18 @@ pub fn run(cmd: StepCmd) -> anyhow::Result<()> {
     };
     std::fs::create_dir_all(&scratch.path)?;
     let settings = cmd.processes.settings(Mode::Lockstep, true)?;
+    let qos = if cmd.idle_poll {
+        let f = sys::hold_cpu_latency();
+        anyhow::ensure!(
+            f.is_some(),
+            "--idle-poll: cannot write /dev/cpu_dma_latency (needs root)"
+        );
+        f
+    } else {
+        None
+    };
+    // The floor a step can reach: one blocking wake-up, measured here now.
+    let wake_us = sys::wake_up_cpu_us(20_000).context("the wake-up reference")?;
     let mut pairs = Vec::new();
     for i in 0..cmd.repeat {
         let mut pair = Vec::new();
@@ -154,8 +171,17 @@ pub fn run(cmd: StepCmd) -> anyhow::Result<()> {
         fmt_num(launch::os::load_average().unwrap_or(f64::NAN))
     );
     println!(
-        "  {:<28} {:>12} {:>14} {:>12}",
-        "kind", "marginal us", "whole-life us", "steps (long)"
+        "  one blocking wake-up (two threads, Unix datagram ping-pong): {} us of CPU{}",
+        fmt_num(wake_us),
+        if qos.is_some() {
+            "; idle CPUs poll (/dev/cpu_dma_latency held at 0)"
+        } else {
+            ""
+        }
+    );
+    println!(
+        "  {:<28} {:>12} {:>14} {:>12} {:>10}",
+        "kind", "marginal us", "whole-life us", "steps (long)", "/ wake-up"
     );
     let mut figures = BTreeMap::new();
     for kind in &kinds {
@@ -178,14 +204,15 @@ pub fn run(cmd: StepCmd) -> anyhow::Result<()> {
             kind.clone()
         };
         println!(
-            "  {label:<28} {:>12} {:>14} {:>12}",
+            "  {label:<28} {:>12} {:>14} {:>12} {:>10}",
             fmt_num(m),
             fmt_num(w),
-            fmt_num(steps)
+            fmt_num(steps),
+            fmt_num(m / wake_us)
         );
         figures.insert(
             kind.clone(),
-            serde_json::json!({ "marginal_us": m, "whole_life_us": w }),
+            serde_json::json!({ "marginal_us": m, "whole_life_us": w, "per_wake_up": m / wake_us }),
         );
     }
     if cmd.syscalls {
@@ -227,7 +254,13 @@ pub fn run(cmd: StepCmd) -> anyhow::Result<()> {
         }
     }
     let json = scratch.path.with_extension("json");
-    std::fs::write(&json, serde_json::to_string_pretty(&figures)?)?;
+    let report = serde_json::json!({
+        "wake_up_us": wake_us,
+        "idle_poll": qos.is_some(),
+        "kinds": figures,
+    });
+    std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
+    drop(qos);
     println!("\n{}", json.display());
     Ok(())
 }

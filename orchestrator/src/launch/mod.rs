@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
-use iceoryx2::port::listener::{Listener, ListenerWaitError};
+use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
@@ -105,6 +105,8 @@ pub(crate) struct Ports {
     pub(crate) node: Node<ipc::Service>,
     pub(crate) clock: Publisher<Clock>,
     pub(crate) done: Listener<ipc::Service>,
+    /// The socket `done` wakes up on.
+    done_fd: i32,
     /// Wake events by process index; `None` for a process another host runs.
     pub(crate) wakes: Vec<Option<Notifier<ipc::Service>>>,
     /// Sequence number of the next clock sample.
@@ -138,6 +140,7 @@ impl Ports {
             .listener_builder()
             .create()
             .context("done listener")?;
+        let done_fd = sys::listener_fd(&done);
         let mut wakes = Vec::with_capacity(procs.len());
         for p in procs {
             if !local(p) {
@@ -154,6 +157,7 @@ impl Ports {
         Ok(Self {
             node,
             clock,
+            done_fd,
             done,
             wakes,
             clock_seq: 0,
@@ -734,23 +738,30 @@ pub(crate) fn wait_done(
         if t.remaining == 0 && !ports.recovery.any_awaiting() {
             break;
         }
+        // poll(2) on the listener's socket, then a non-blocking take: three
+        // system calls where iceoryx2's timed_wait makes seven (it toggles
+        // the socket's blocking mode and its timeout on every call).
+        let readable = sys::wait_readable(ports.done_fd, slice).context("waiting for done")?;
         ports
             .done
-            .timed_wait(|ev| t.on(ev.id.as_value()), slice)
-            .map_err(|e| match e {
-                // A signal that lands inside the blocking wait ends it early.
-                ListenerWaitError::InterruptSignal => anyhow::Error::from(RunError::Interrupted(
-                    termination_requested().unwrap_or("SIGINT"),
-                )),
-                other => anyhow::Error::new(other).context("waiting for done"),
-            })?;
+            .try_wait(|ev| t.on(ev.id.as_value()))
+            .context("taking done")?;
         if t.remaining == 0 && t.ready.is_empty() && !ports.recovery.any_awaiting() {
             break;
         }
         if let Some(sig) = termination_requested() {
             return Err(RunError::Interrupted(sig).into());
         }
-        for d in sup.reap() {
+        // A process that died sends no done: the wait runs out (or SIGCHLD
+        // cuts it short) before a death matters, so reap only then, not
+        // after every done.
+        let deaths = if readable {
+            sup.send_due_signals();
+            Vec::new()
+        } else {
+            sup.reap()
+        };
+        for d in deaths {
             ports.handle_death(d, procs, sup, sim_time_s)?;
             // The tick starts over for the restarted process.
             start = Instant::now();

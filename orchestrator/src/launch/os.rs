@@ -57,6 +57,78 @@ pub fn enter_netns(ns: &std::fs::File) -> std::io::Result<()> {
     Ok(())
 }
 
+/// Asks the kernel to keep CPUs out of idle states deeper than polling
+/// while the returned file is open (PM QoS, as cyclictest does; `None` if
+/// it cannot, e.g. without permission).
+pub fn hold_cpu_latency() -> Option<std::fs::File> {
+    use std::io::Write;
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/cpu_dma_latency")
+        .ok()?;
+    f.write_all(&0i32.to_ne_bytes()).ok()?;
+    Some(f)
+}
+
+/// CPU time of one blocking wake-up on this machine, µs: two threads
+/// bounce a byte over a Unix datagram socket pair `rounds` times, each
+/// blocking in `recv` until the other's `send` wakes it; the process's CPU
+/// over the wake-ups (two per round).
+pub fn wake_up_cpu_us(rounds: u32) -> std::io::Result<f64> {
+    use std::os::unix::net::UnixDatagram;
+    let (a, b) = UnixDatagram::pair()?;
+    let echo = std::thread::spawn(move || -> std::io::Result<()> {
+        let mut buf = [0u8; 1];
+        for _ in 0..rounds {
+            b.recv(&mut buf)?;
+            b.send(&buf)?;
+        }
+        Ok(())
+    });
+    let mut buf = [0u8; 1];
+    let before = self_cpu_s();
+    for _ in 0..rounds {
+        a.send(&buf)?;
+        a.recv(&mut buf)?;
+    }
+    echo.join()
+        .map_err(|_| std::io::Error::other("the echo thread panicked"))??;
+    let cpu = self_cpu_s() - before;
+    Ok(cpu * 1e6 / (2.0 * f64::from(rounds.max(1))))
+}
+
+/// The socket an iceoryx2 event listener wakes up on.
+pub fn listener_fd(l: &iceoryx2::port::listener::Listener<iceoryx2::prelude::ipc::Service>) -> i32 {
+    use iceoryx2::prelude::FileDescriptorBased;
+    // SAFETY: the descriptor stays owned by the listener; it is only polled.
+    unsafe { l.file_descriptor().native_handle() }
+}
+
+/// Waits until `fd` is readable or `timeout` has passed: `Ok(true)` if it
+/// is, `Ok(false)` on the timeout or a signal (the caller checks for a
+/// termination request).
+pub fn wait_readable(fd: i32, timeout: std::time::Duration) -> std::io::Result<bool> {
+    let mut p = libc::pollfd {
+        fd,
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
+    // SAFETY: one pollfd that lives across the call.
+    match unsafe { libc::poll(&mut p, 1, ms) } {
+        -1 => {
+            let e = std::io::Error::last_os_error();
+            if e.kind() == std::io::ErrorKind::Interrupted {
+                Ok(false)
+            } else {
+                Err(e)
+            }
+        }
+        0 => Ok(false),
+        _ => Ok(true),
+    }
+}
+
 /// Makes the child receive SIGTERM if the orchestrator dies, so no
 /// process outlives its run.
 pub fn die_with_parent(cmd: &mut Command) {

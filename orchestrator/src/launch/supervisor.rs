@@ -129,15 +129,7 @@ impl Supervisor {
     /// Reaps every child that has exited; returns the ones that died while
     /// the run still needed them. Sends the signals that are due.
     pub fn reap(&mut self) -> Vec<Death> {
-        let now = Instant::now();
-        self.timers.retain(|&(at, pid, sig)| {
-            if at <= now {
-                sys::send_signal(pid, sig);
-                false
-            } else {
-                true
-            }
-        });
+        self.send_due_signals();
         let mut deaths = Vec::new();
         while let Some((pid, info)) = sys::reap_any() {
             if let Some(&i) = self.by_pid.get(&pid) {
@@ -154,6 +146,22 @@ impl Supervisor {
             }
         }
         deaths
+    }
+
+    /// Sends the signals that are due (no system call when none is).
+    pub fn send_due_signals(&mut self) {
+        if self.timers.is_empty() {
+            return;
+        }
+        let now = Instant::now();
+        self.timers.retain(|&(at, pid, sig)| {
+            if at <= now {
+                sys::send_signal(pid, sig);
+                false
+            } else {
+                true
+            }
+        });
     }
 
     /// Marks the run as stopping: exits from now on are expected.
