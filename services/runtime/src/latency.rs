@@ -2,6 +2,8 @@
 //! and one counter increment per sample; percentiles are computed only when
 //! reported (once a second, and at exit).
 
+use std::cell::RefCell;
+
 use hdrhistogram::Histogram;
 
 /// A histogram of latencies in nanoseconds (1 ns to 60 s, 2 significant digits: a
@@ -12,9 +14,24 @@ use hdrhistogram::Histogram;
 /// digits a bucket span holds 1024 counters, with 2 it holds 128; at 100
 /// vehicles (500 processes) those walks were ~7 % of the run's CPU
 /// (`perf`: `HistogramIterator::next`); 2 digits walk 8× fewer counters.
+///
+/// Quantiles asked for more than once are followed, not recomputed: each
+/// keeps a cursor (its bucket and the count below it) that every record
+/// updates with one comparison, and a query moves it by the few buckets the
+/// quantile moved since the last one, instead of walking from zero.
 #[derive(Debug, Clone)]
 pub struct LatencyRecorder {
     hist: Option<Histogram<u64>>,
+    cursors: RefCell<Vec<Cursor>>,
+}
+
+/// Where a followed quantile stands: the bucket `at` (its lowest
+/// equivalent value) and how many samples lie in lower buckets.
+#[derive(Debug, Clone, Copy)]
+struct Cursor {
+    q: f64,
+    at: u64,
+    below: u64,
 }
 
 /// Significant decimal digits the histogram keeps.
@@ -46,13 +63,20 @@ impl LatencyRecorder {
     pub fn new() -> Self {
         Self {
             hist: Histogram::new_with_bounds(1, 60_000_000_000, SIGNIFICANT_DIGITS).ok(),
+            cursors: RefCell::new(Vec::new()),
         }
     }
 
     /// Records one latency, ns (clamped into range).
     pub fn record_ns(&mut self, ns: u64) {
         if let Some(h) = self.hist.as_mut() {
-            h.saturating_record(ns.max(1));
+            let v = ns.max(1).min(h.high());
+            h.saturating_record(v);
+            for c in self.cursors.get_mut().iter_mut() {
+                if v < c.at {
+                    c.below += 1;
+                }
+            }
         }
     }
 
@@ -60,6 +84,7 @@ impl LatencyRecorder {
     pub fn merge(&mut self, other: &LatencyRecorder) {
         if let (Some(a), Some(b)) = (self.hist.as_mut(), other.hist.as_ref()) {
             let _ = a.add(b);
+            self.cursors.get_mut().clear();
         }
     }
 
@@ -83,39 +108,68 @@ impl LatencyRecorder {
             for &(v, n) in buckets {
                 let _ = h.record_n(v.clamp(1, h.high()), n);
             }
+            self.cursors.get_mut().clear();
         }
     }
 
     /// Value at quantile `q` in ns (0 when empty).
     pub fn quantile_ns(&self, q: f64) -> u64 {
-        self.hist
-            .as_ref()
-            .filter(|h| !h.is_empty())
-            .map_or(0, |h| h.value_at_quantile(q))
+        self.quantiles_ns([q])[0]
     }
 
-    /// Values at several ascending quantiles in one pass over the buckets, ns
-    /// (zeros when empty).
+    /// Values at several quantiles, ns (zeros when empty). The first query
+    /// of a quantile walks the buckets; later ones move its cursor.
     pub fn quantiles_ns<const N: usize>(&self, qs: [f64; N]) -> [u64; N] {
         let mut out = [0u64; N];
         let Some(h) = self.hist.as_ref().filter(|h| !h.is_empty()) else {
             return out;
         };
         let total = h.len();
-        let targets = qs.map(|q| ((q.clamp(0.0, 1.0) * total as f64).ceil() as u64).max(1));
-        let mut k = 0;
-        let mut seen = 0u64;
-        for v in h.iter_recorded() {
-            seen += v.count_at_value();
-            while k < N && seen >= targets[k] {
-                out[k] = h.highest_equivalent(v.value_iterated_to());
-                k += 1;
+        let mut cursors = self.cursors.borrow_mut();
+        for (slot, q) in out.iter_mut().zip(qs) {
+            let q = q.clamp(0.0, 1.0);
+            let target = ((q * total as f64).ceil() as u64).max(1);
+            let i = match cursors.iter().position(|c| c.q == q) {
+                Some(i) => i,
+                None => {
+                    cursors.push(Self::walk_to(h, q, target));
+                    cursors.len() - 1
+                }
+            };
+            let c = &mut cursors[i];
+            loop {
+                let here = h.count_at(c.at);
+                if c.below + here < target {
+                    c.below += here;
+                    c.at = h.next_non_equivalent(c.at);
+                } else if c.below >= target && c.at > 1 {
+                    let prev = h.lowest_equivalent(c.at - 1);
+                    c.below -= h.count_at(prev);
+                    c.at = prev;
+                } else {
+                    break;
+                }
             }
-            if k == N {
-                break;
-            }
+            *slot = h.highest_equivalent(c.at);
         }
         out
+    }
+
+    /// A new cursor at the bucket of the `target`-th sample (one walk).
+    fn walk_to(h: &Histogram<u64>, q: f64, target: u64) -> Cursor {
+        let mut seen = 0u64;
+        for v in h.iter_recorded() {
+            let n = v.count_at_value();
+            if seen + n >= target {
+                return Cursor {
+                    q,
+                    at: h.lowest_equivalent(v.value_iterated_to()),
+                    below: seen,
+                };
+            }
+            seen += n;
+        }
+        Cursor { q, at: 1, below: 0 }
     }
 
     /// Largest value, ns (0 when empty).
@@ -168,9 +222,36 @@ mod tests {
         }
         let qs = [0.5, 0.9, 0.99, 0.999];
         let got = a.quantiles_ns(qs);
+        let h = a.hist.as_ref().unwrap();
         for (q, g) in qs.iter().zip(got) {
-            assert_eq!(g, a.quantile_ns(*q), "q = {q}");
+            assert_eq!(g, h.value_at_quantile(*q), "q = {q}");
         }
         assert_eq!(LatencyRecorder::new().quantiles_ns([0.5]), [0]);
+    }
+
+    proptest::proptest! {
+        /// Followed quantiles (cursors moved between queries, over records
+        /// that shift the distribution up and down) equal a fresh walk.
+        #[test]
+        fn followed_quantiles_equal_a_fresh_walk(
+            batches in proptest::collection::vec(
+                (proptest::collection::vec(1u64..100_000_000_000, 1..200), 0u8..3), 1..12),
+        ) {
+            let mut a = LatencyRecorder::new();
+            for (values, shift) in batches {
+                for v in values {
+                    a.record_ns(v >> (8 * u32::from(shift)));
+                }
+                let qs = [0.0, 0.5, 0.99, 0.999, 1.0];
+                let followed = a.quantiles_ns(qs);
+                for (q, f) in qs.iter().zip(followed) {
+                    let fresh = LatencyRecorder::walk_to(a.hist.as_ref().unwrap(), *q,
+                        ((q * a.count() as f64).ceil() as u64).max(1));
+                    let h = a.hist.as_ref().unwrap();
+                    proptest::prop_assert_eq!(f, h.highest_equivalent(fresh.at), "q = {}", q);
+                    proptest::prop_assert_eq!(f, h.highest_equivalent(h.value_at_quantile(*q)), "q = {} vs value_at_quantile", q);
+                }
+            }
+        }
     }
 }
