@@ -697,3 +697,50 @@ fn a_second_run_into_the_same_directory_is_refused_unless_forced() {
     assert!(Recording::open(&out.join("recording.mcap")).is_ok());
     assert_eq!(std::fs::read_to_string(&mine).unwrap(), "kept");
 }
+
+/// The PM QoS CPU latency target in force now (µs; 2,000,000,000 when no
+/// one asks for less).
+fn cpu_latency_target_us() -> i32 {
+    let mut b = [0u8; 4];
+    use std::io::Read;
+    std::fs::File::open("/dev/cpu_dma_latency")
+        .and_then(|mut f| f.read_exact(&mut b))
+        .expect("read /dev/cpu_dma_latency");
+    i32::from_ne_bytes(b)
+}
+
+#[test]
+fn idle_poll_holds_the_cpu_latency_at_zero_while_the_run_goes_and_lets_go_after() {
+    let before = cpu_latency_target_us();
+    let tmp = tempfile::tempdir().unwrap();
+    let sc = write_scenario(tmp.path(), "s.toml", &small_scenario("poll", 3000.0));
+    let out = tmp.path().join("r");
+    let mut child = shoal()
+        .args([
+            "run",
+            "--quiet",
+            "--idle-poll",
+            sc.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let run = wait_run_json(&out, Duration::from_secs(20));
+    let run_id = run["run_id"].as_str().unwrap().to_string();
+    let start = Instant::now();
+    while processes_mentioning(&run_id).len() < 2 + 3 * 4 + 2 {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "children never came up"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert_eq!(cpu_latency_target_us(), 0, "held while the run goes");
+    std::thread::sleep(Duration::from_millis(500));
+    signal(child.id(), libc::SIGINT);
+    assert_eq!(child.wait().unwrap().code(), Some(130));
+    assert_eq!(cpu_latency_target_us(), before, "let go when the run ends");
+}

@@ -427,7 +427,7 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
     let load = |l: Option<f64>| l.map_or("?".to_string(), |x| format!("{x:.2}"));
     println!(
         "shoal bench run: {} ({} vehicles, {} processes), seed {}, {} s simulated per lockstep run, \
-         {} runs per variant; load average {} -> {}; {:.0} s",
+         {} runs per variant; load average {} -> {}; {:.0} s{}",
         scenario.name,
         scenario.vehicles.len(),
         processes.map_or("?".to_string(), |p| p.to_string()),
@@ -436,7 +436,12 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
         cmd.repeat,
         load(load_before),
         load(load_after),
-        elapsed
+        elapsed,
+        if cmd.processes.idle_poll {
+            "; idle CPUs poll (/dev/cpu_dma_latency held at 0)"
+        } else {
+            ""
+        }
     );
     println!();
     print!("{}", render_lockstep(&variants));

@@ -45,11 +45,6 @@ pub struct StepCmd {
     /// Keep the runs' directories (under /tmp) and print where.
     #[arg(long)]
     pub keep: bool,
-    /// Keep idle CPUs polling during the runs (`/dev/cpu_dma_latency` held
-    /// at 0, as cyclictest does): a wake-up then needs no interrupt to a
-    /// halted CPU, which on a virtual machine is most of its cost.
-    #[arg(long)]
-    pub idle_poll: bool,
     #[command(flatten)]
     pub processes: ProcessArgs,
 }
@@ -129,13 +124,12 @@ pub fn run(cmd: StepCmd) -> anyhow::Result<()> {
     };
     std::fs::create_dir_all(&scratch.path)?;
     let settings = cmd.processes.settings(Mode::Lockstep, true)?;
-    let qos = if cmd.idle_poll {
-        let f = sys::hold_cpu_latency();
-        anyhow::ensure!(
-            f.is_some(),
-            "--idle-poll: cannot write /dev/cpu_dma_latency (needs root)"
-        );
-        f
+    // Held for the wake-up reference too; each run holds it again.
+    let qos = if settings.idle_poll {
+        Some(
+            sys::hold_cpu_latency()
+                .context("--idle-poll: cannot write /dev/cpu_dma_latency (it needs root)")?,
+        )
     } else {
         None
     };

@@ -63,12 +63,20 @@ pub struct ProcessArgs {
     /// Longest a lockstep tick may take before a run is declared hung, s.
     #[arg(long, default_value_t = 30.0)]
     pub tick_timeout: f64,
+    /// Keep idle CPUs polling while the run goes (`/dev/cpu_dma_latency`
+    /// held at 0, as cyclictest does; needs root). A wake-up then needs no
+    /// interrupt to a halted CPU, which on a virtual machine costs tens of
+    /// µs; the idle cores spin in the kernel's idle loop meanwhile.
+    #[arg(long)]
+    pub idle_poll: bool,
 }
 
 impl ProcessArgs {
     /// The settings of runs in `mode`, with a progress bar unless `quiet`.
     pub fn settings(&self, mode: Mode, quiet: bool) -> anyhow::Result<RunSettings> {
-        RunSettings::new(mode, self.bin_dir.clone(), quiet, self.tick_timeout)
+        let mut s = RunSettings::new(mode, self.bin_dir.clone(), quiet, self.tick_timeout)?;
+        s.idle_poll = self.idle_poll;
+        Ok(s)
     }
 }
 

@@ -44,6 +44,8 @@ pub struct RunOptions {
     pub spin_us: u64,
     /// Spread the run over these hosts (`shoal run --hosts`); `None`: here.
     pub hosts: Option<crate::hosts::HostsFile>,
+    /// Keep idle CPUs polling while the run goes (`--idle-poll`).
+    pub idle_poll: bool,
 }
 
 /// What a run produced.
@@ -211,6 +213,15 @@ impl Ports {
 
 /// Runs a scenario to the end and leaves the recording in `opts.out`.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
+    // Held until the run returns: idle CPUs poll instead of halting.
+    let _idle_poll = if opts.idle_poll {
+        Some(
+            sys::hold_cpu_latency()
+                .context("--idle-poll: cannot write /dev/cpu_dma_latency (it needs root)")?,
+        )
+    } else {
+        None
+    };
     if let Some(hosts) = &opts.hosts {
         return crate::hosts::coordinator::run(opts, hosts);
     }

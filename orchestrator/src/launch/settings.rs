@@ -25,6 +25,8 @@ pub struct RunSettings {
     pub spin_us: u64,
     /// Spread runs over these hosts; `None`: run here.
     pub hosts: Option<crate::hosts::HostsFile>,
+    /// Keep idle CPUs polling during each run (`--idle-poll`).
+    pub idle_poll: bool,
 }
 
 /// Where the service binaries are: `bin_dir`, else the directory of the
@@ -57,6 +59,7 @@ impl RunSettings {
             tick_timeout: Duration::from_secs_f64(tick_timeout.max(0.1)),
             spin_us: 0,
             hosts: None,
+            idle_poll: false,
         })
     }
 
@@ -71,6 +74,7 @@ impl RunSettings {
             tick_timeout: self.tick_timeout,
             spin_us: self.spin_us,
             hosts: self.hosts.clone(),
+            idle_poll: self.idle_poll,
         }
     }
 }

@@ -322,13 +322,18 @@ pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
     let cpus = std::thread::available_parallelism().map_or(0, |n| n.get());
     let head = format!(
         "shoal bench scale: shape {}, seed {}, {} s simulated per run, lockstep; {cpus} CPUs, \
-         load average {} -> {}; {:.0} s in all",
+         load average {} -> {}; {:.0} s in all{}",
         cmd.shape.name(),
         cmd.seed,
         fmt_num(cmd.duration_s),
         load(load_before),
         load(load_after),
-        elapsed
+        elapsed,
+        if cmd.processes.idle_poll {
+            "; idle CPUs poll (/dev/cpu_dma_latency held at 0)"
+        } else {
+            ""
+        }
     );
     let table = render_table(&rows);
     println!("{head}\n\n{table}");
