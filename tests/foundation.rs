@@ -218,29 +218,8 @@ fn sigint_to_shoal_stops_every_child_and_leaves_no_shared_memory() {
     let tmp = tempfile::tempdir().unwrap();
     let sc = write_scenario(tmp.path(), "s.toml", &small_scenario("long", 3000.0));
     let out = tmp.path().join("r");
-    let mut child = shoal()
-        .args([
-            "run",
-            "--quiet",
-            sc.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let run = wait_run_json(&out, Duration::from_secs(20));
-    let run_id = run["run_id"].as_str().unwrap().to_string();
-    // Half-way: wait until the children are up and the recording grows.
-    let start = Instant::now();
-    while processes_mentioning(&run_id).len() < 2 + 3 * 4 + 2 {
-        assert!(
-            start.elapsed() < Duration::from_secs(20),
-            "children never came up"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    // Half-way: the children are up and the recording grows.
+    let (mut child, run_id) = start_run(&sc, &out, &[], 2 + 3 * 4 + 2);
     std::thread::sleep(Duration::from_millis(1500));
     assert!(
         !shoal_runtime::list_domain_files(&run_id).is_empty(),
@@ -715,29 +694,7 @@ fn idle_poll_holds_the_cpu_latency_at_zero_while_the_run_goes_and_lets_go_after(
     let tmp = tempfile::tempdir().unwrap();
     let sc = write_scenario(tmp.path(), "s.toml", &small_scenario("poll", 3000.0));
     let out = tmp.path().join("r");
-    let mut child = shoal()
-        .args([
-            "run",
-            "--quiet",
-            "--idle-poll",
-            sc.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let run = wait_run_json(&out, Duration::from_secs(20));
-    let run_id = run["run_id"].as_str().unwrap().to_string();
-    let start = Instant::now();
-    while processes_mentioning(&run_id).len() < 2 + 3 * 4 + 2 {
-        assert!(
-            start.elapsed() < Duration::from_secs(20),
-            "children never came up"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let (mut child, _) = start_run(&sc, &out, &["--idle-poll"], 2 + 3 * 4 + 2);
     assert_eq!(cpu_latency_target_us(), 0, "held while the run goes");
     std::thread::sleep(Duration::from_millis(500));
     signal(child.id(), libc::SIGINT);

@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 /// Where the shoal binaries are.
@@ -151,6 +151,34 @@ pub fn wait_run_json(out: &Path, timeout: Duration) -> serde_json::Value {
         );
         std::thread::sleep(Duration::from_millis(20));
     }
+}
+
+/// Starts `shoal run --quiet EXTRA… SCENARIO --out OUT` (stdout dropped,
+/// stderr piped) and waits until its `run.json` names the run and `up`
+/// processes mention the run id (the orchestrator and its children);
+/// returns the running child and the run id.
+pub fn start_run(scenario: &Path, out: &Path, extra: &[&str], up: usize) -> (Child, String) {
+    let mut child = shoal()
+        .args(["run", "--quiet"])
+        .args(extra)
+        .arg(scenario)
+        .arg("--out")
+        .arg(out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let run = wait_run_json(out, Duration::from_secs(20));
+    let run_id = run["run_id"].as_str().unwrap().to_string();
+    let start = Instant::now();
+    while processes_mentioning(&run_id).len() < up {
+        if start.elapsed() > Duration::from_secs(20) {
+            let _ = child.kill();
+            panic!("the run's processes never came up");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    (child, run_id)
 }
 
 /// Pids of processes whose command line mentions `needle`.

@@ -125,14 +125,7 @@ pub fn run(cmd: StepCmd) -> anyhow::Result<()> {
     std::fs::create_dir_all(&scratch.path)?;
     let settings = cmd.processes.settings(Mode::Lockstep, true)?;
     // Held for the wake-up reference too; each run holds it again.
-    let qos = if settings.idle_poll {
-        Some(
-            sys::hold_cpu_latency()
-                .context("--idle-poll: cannot write /dev/cpu_dma_latency (it needs root)")?,
-        )
-    } else {
-        None
-    };
+    let qos = launch::idle_poll_guard(settings.idle_poll)?;
     // The floor a step can reach: one blocking wake-up, measured here now.
     let wake_us = sys::wake_up_cpu_us(20_000).context("the wake-up reference")?;
     let mut pairs = Vec::new();

@@ -211,17 +211,21 @@ impl Ports {
     }
 }
 
+/// With `on`, keeps idle CPUs polling until the returned guard drops
+/// (`--idle-poll`); an error names what stopped it.
+pub fn idle_poll_guard(on: bool) -> anyhow::Result<Option<std::fs::File>> {
+    if !on {
+        return Ok(None);
+    }
+    sys::hold_cpu_latency()
+        .map(Some)
+        .context("--idle-poll: cannot write /dev/cpu_dma_latency (it needs root)")
+}
+
 /// Runs a scenario to the end and leaves the recording in `opts.out`.
 pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
     // Held until the run returns: idle CPUs poll instead of halting.
-    let _idle_poll = if opts.idle_poll {
-        Some(
-            sys::hold_cpu_latency()
-                .context("--idle-poll: cannot write /dev/cpu_dma_latency (it needs root)")?,
-        )
-    } else {
-        None
-    };
+    let _idle_poll = idle_poll_guard(opts.idle_poll)?;
     if let Some(hosts) = &opts.hosts {
         return crate::hosts::coordinator::run(opts, hosts);
     }
