@@ -30,6 +30,15 @@ fn paper_scenario_is_safe_and_the_formation_returns_for_seeds_0_to_10() {
                 .unwrap_or_else(|| panic!("seed {seed}: {p} missing"))
         };
         assert_eq!(f("/safety/collisions"), 0.0, "seed {seed}");
+        // Every vehicle's MPC solved every step (10 Hz over 200 s), and the
+        // unconstrained shortcut took some of them, not all.
+        assert_eq!(f("/mpc/solves"), 5.0 * 10.0 * 200.0, "seed {seed}");
+        assert_eq!(f("/mpc/failures"), 0.0, "seed {seed}");
+        let shortcut = f("/mpc/unconstrained");
+        assert!(
+            shortcut > 0.0 && shortcut < f("/mpc/solves"),
+            "seed {seed}: {shortcut} of the solves without clarabel"
+        );
         assert!(
             f("/safety/min_pair_distance_m") >= f("/safety/safe_distance_m"),
             "seed {seed}: {s}"

@@ -414,11 +414,15 @@ pub(crate) fn end_to_end(scenario: &Scenario, rec: &Recording) -> LatencySummary
 /// Solve times and failures of every vehicle's MPC.
 pub(crate) fn mpc(scenario: &Scenario, rec: &Recording) -> MpcFigures {
     let mut solve = Vec::new();
-    let mut failures = 0u64;
+    let (mut failures, mut unconstrained) = (0u64, 0u64);
     for v in &scenario.vehicles {
         let stats = rec.samples::<MpcStats>(&ipc_types::topic(&v.name, Channel::MpcStats));
         solve.extend(stats.iter().map(|s| s.solve_ns as f64 / 1e3));
         failures += stats.last().map_or(0, |s| s.failures);
+        unconstrained += stats
+            .iter()
+            .filter(|s| s.status == u32::from(mpc::MpcStatus::Unconstrained.code()))
+            .count() as u64;
     }
     solve.sort_by(f64::total_cmp);
     MpcFigures {
@@ -428,6 +432,8 @@ pub(crate) fn mpc(scenario: &Scenario, rec: &Recording) -> MpcFigures {
             max: solve.last().copied().unwrap_or(0.0),
         },
         failures,
+        solves: solve.len() as u64,
+        unconstrained,
     }
 }
 

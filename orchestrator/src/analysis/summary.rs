@@ -239,6 +239,13 @@ pub struct MpcFigures {
     pub solve_us: SolveTimes,
     /// Failed solves, summed over vehicles.
     pub failures: u64,
+    /// Control steps that published a solve (`mpc_stats` samples), summed over vehicles.
+    #[serde(default)]
+    pub solves: u64,
+    /// Of those, the steps whose unconstrained minimiser was within every bound (the
+    /// exact solution without clarabel, status 2); the rest went to clarabel.
+    #[serde(default)]
+    pub unconstrained: u64,
 }
 
 /// Solve-time percentiles, µs.

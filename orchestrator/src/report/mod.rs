@@ -218,7 +218,16 @@ fn key_figures(s: &Summary) -> Vec<(&'static str, &'static str, String, Option<b
         (
             "software",
             "MPC solve p50 / p99",
-            format!("{:.0} / {:.0} µs", s.mpc.solve_us.p50, s.mpc.solve_us.p99),
+            if s.mpc.solves > 0 {
+                format!(
+                    "{:.0} / {:.0} µs ({:.0} % without clarabel)",
+                    s.mpc.solve_us.p50,
+                    s.mpc.solve_us.p99,
+                    100.0 * s.mpc.unconstrained as f64 / s.mpc.solves as f64
+                )
+            } else {
+                format!("{:.0} / {:.0} µs", s.mpc.solve_us.p50, s.mpc.solve_us.p99)
+            },
             None,
         ),
         (
