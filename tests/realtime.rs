@@ -193,6 +193,7 @@ fn a_realtime_run_reports_deadlines_steps_and_every_hop() {
         assert!(0.0 < p50 && p50 <= p99 && p99 <= max, "{kind}: {h}");
     }
     assert!(s["latency_us"]["end_to_end"]["count"].as_u64().unwrap() > 0);
+    assert_chain_stages(&s);
     // The same statistics are in the recording, on the stats channel.
     let rec = Recording::open(&out.join("recording.mcap")).unwrap();
     let stats = rec.samples::<ipc_types::ProcessStats>("/stats");
@@ -221,4 +222,79 @@ fn a_realtime_run_reports_deadlines_steps_and_every_hop() {
         .map(|h| ipc_types::str_of(&h.channel))
         .collect();
     assert!(hops.contains(&"thrust"), "sim-plant takes thrust: {hops:?}");
+}
+
+/// The stages of the sensor → thrust chain in `summary.json`, each with
+/// figures (`latency_us.chain`).
+fn assert_chain_stages(s: &serde_json::Value) {
+    let chain = s["latency_us"]["chain"].as_array().unwrap();
+    let stages: Vec<&str> = chain.iter().map(|c| c["stage"].as_str().unwrap()).collect();
+    assert_eq!(
+        stages,
+        ["world", "perception", "planner", "mpc", "sim-plant"],
+        "{chain:?}"
+    );
+    for c in chain {
+        assert!(c["count"].as_u64().unwrap() > 0, "no chain through {c}");
+        let (p50, p99, max) = (
+            c["p50"].as_f64().unwrap(),
+            c["p99"].as_f64().unwrap(),
+            c["max"].as_f64().unwrap(),
+        );
+        assert!(0.0 < p50 && p50 <= p99 && p99 <= max, "{c}");
+    }
+    assert!(
+        s["latency_us"]["frame_to_thrust"]["count"]
+            .as_u64()
+            .unwrap()
+            > 0
+    );
+}
+
+#[test]
+fn a_dataflow_run_steps_each_stage_on_its_inputs_and_counts_the_deadlines_it_misses() {
+    let tmp = tempfile::tempdir().unwrap();
+    // F1's camera loses every frame from 2 to 6 s: its planner gets no
+    // parent fix for 40 frames, and steps at its deadlines instead.
+    let text = format!(
+        "{}\n[[faults]]\naction = \"drop\"\nvehicle = \"F1\"\nfrom_s = 2.0\nto_s = 6.0\nfraction = 1.0\n",
+        small_scenario("df", 8.0)
+    );
+    let scenario = write_scenario(tmp.path(), "df.toml", &text);
+    let out = tmp.path().join("df");
+    let o = run_shoal(&[
+        "run",
+        "--quiet",
+        "--mode",
+        "dataflow",
+        "--out",
+        out.to_str().unwrap(),
+        scenario.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = summary(&out);
+    assert_eq!(s["mode"], "dataflow");
+    assert_chain_stages(&s);
+    // The plant steps on its 10 Hz clock and again on each thrust, which it
+    // applies when it comes: about twice its clock's 3 × 80 activations.
+    let plant_steps = s["step_us"]["sim-plant"]["count"].as_u64().unwrap();
+    assert!(plant_steps > 360, "sim-plant stepped {plant_steps} times");
+    // Driven by data, thrust follows its frame within that frame; on phased
+    // timers it takes a whole period (100 ms; see the realtime test).
+    let e2e = s["latency_us"]["end_to_end"]["p50"].as_f64().unwrap();
+    assert!(e2e < 50_000.0, "sensor -> thrust p50 {e2e} µs");
+    // F1's planner missed its deadline on the frames without a fix...
+    let missed = s["deadline_misses"]["planner"].as_u64().unwrap();
+    assert!(missed >= 30, "planner deadline misses: {missed}");
+    // ...and still stepped on each of them: F1's setpoints kept coming.
+    let rec = Recording::open(&out.join("recording.mcap")).unwrap();
+    let during = rec
+        .samples::<ipc_types::Setpoint>("/F1/setpoint")
+        .iter()
+        .filter(|p| (2_500_000_000..5_500_000_000).contains(&p.header.sim_time_ns))
+        .count();
+    assert!(
+        during >= 25,
+        "F1's planner published {during} setpoints in 3 s without a fix"
+    );
 }

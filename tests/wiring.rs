@@ -43,6 +43,7 @@ fn ctx(sim_time_ns: u64) -> StepContext {
         since_last_ns: TICK_NS,
         last: false,
         mode: Mode::Lockstep,
+        woken_by: shoal_runtime::Wake::Tick,
     }
 }
 

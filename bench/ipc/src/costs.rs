@@ -136,6 +136,7 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
         since_last_ns: 0,
         last: false,
         mode: Mode::Realtime,
+        woken_by: shoal_runtime::Wake::Tick,
     };
     let mut sfailure: Option<BenchError> = None;
     let hop_shoal_ns = best_of(hops, || {

@@ -100,6 +100,7 @@ fn context(tick: u64) -> StepContext {
         since_last_ns: 0,
         last: false,
         mode: Mode::Realtime,
+        woken_by: shoal_runtime::Wake::Tick,
     }
 }
 

@@ -2,7 +2,7 @@
 //! the processes' statistics: safety, formation, perception, mission,
 //! latency, the controllers.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 use ipc_types::{Channel, LeaderPose, MpcStats, Truth};
 use nalgebra::{Point3, Vector3};
@@ -409,6 +409,72 @@ pub(crate) fn end_to_end(scenario: &Scenario, rec: &Recording) -> LatencySummary
         }
     }
     e2e.summary()
+}
+
+/// The stages of the sensor → thrust chain, in order: each one's figure is
+/// the time from the previous stage's output to its own (waiting, transport
+/// and work), so that a chain's stages add up to its end-to-end latency.
+/// `perception` ends when both camera-pose's fix (a follower's) and the
+/// sonar scan of the frame are out, as the planner needs both.
+pub const CHAIN_STAGES: [&str; 5] = ["world", "perception", "planner", "mpc", "sim-plant"];
+
+/// First publish time of each origin on `topic`: origin ns → publish ns.
+fn publishes<T: ipc_types::Sample>(rec: &Recording, topic: &str) -> HashMap<u64, u64> {
+    let mut out = HashMap::new();
+    for s in rec.samples::<T>(topic) {
+        let h = s.header();
+        out.entry(h.origin_mono_ns).or_insert(h.publish_mono_ns);
+    }
+    out
+}
+
+/// Sensor event → thrust applied, split by stage ([`CHAIN_STAGES`]): for
+/// every thrust that sim-plant applied, the samples of its chain (those
+/// with its origin) on `world`, `leader_pose` and `sonar`, `setpoint` and
+/// `thrust`. A chain missing a link (a lost frame) is left out. Also each
+/// chain from its frame (the `world` snapshot the sensors saw) to thrust.
+pub(crate) fn chain(scenario: &Scenario, rec: &Recording) -> (Vec<ChainStage>, LatencySummary) {
+    let mut stages: Vec<LatencyRecorder> = CHAIN_STAGES
+        .iter()
+        .map(|_| LatencyRecorder::new())
+        .collect();
+    let mut from_frame = LatencyRecorder::new();
+    let world = publishes::<ipc_types::World>(rec, "/world");
+    for v in &scenario.vehicles {
+        let at = |c: Channel| ipc_types::topic(&v.name, c);
+        let pose = publishes::<LeaderPose>(rec, &at(Channel::LeaderPose));
+        let sonar = publishes::<ipc_types::Sonar>(rec, &at(Channel::Sonar));
+        let setpoint = publishes::<ipc_types::Setpoint>(rec, &at(Channel::Setpoint));
+        let thrust = publishes::<ipc_types::Thrust>(rec, &at(Channel::Thrust));
+        let mut last_origin = 0;
+        for s in rec.samples::<Truth>(&at(Channel::Truth)) {
+            let o = s.thrust_origin_mono_ns;
+            if o == 0 || o == last_origin {
+                continue;
+            }
+            last_origin = o;
+            let perceived = pose.get(&o).max(sonar.get(&o));
+            let (Some(&w), Some(&p), Some(&sp), Some(&th)) =
+                (world.get(&o), perceived, setpoint.get(&o), thrust.get(&o))
+            else {
+                continue;
+            };
+            let marks = [o, w, p, sp, th, s.thrust_applied_mono_ns];
+            for (rec, pair) in stages.iter_mut().zip(marks.windows(2)) {
+                rec.record_ns(pair[1].saturating_sub(pair[0]));
+            }
+            from_frame.record_ns(s.thrust_applied_mono_ns.saturating_sub(w));
+        }
+    }
+    let stages = CHAIN_STAGES
+        .iter()
+        .zip(stages)
+        .map(|(stage, r)| ChainStage {
+            stage: (*stage).to_string(),
+            us: r.summary(),
+        })
+        .collect();
+    (stages, from_frame.summary())
 }
 
 /// Solve times and failures of every vehicle's MPC.

@@ -14,7 +14,7 @@ use shoal_scenario::Scenario;
 
 use super::formation::Passage;
 use super::metrics::{
-    end_to_end, formation, mission, mpc, perception, runtime_stats, safety, verdict,
+    chain, end_to_end, formation, mission, mpc, perception, runtime_stats, safety, verdict,
 };
 use super::track::Tracks;
 use crate::launch::RunOutcome;
@@ -230,6 +230,25 @@ pub struct Latency {
     pub end_to_end: LatencySummary,
     /// Publish → take per input channel kind, every taker merged.
     pub hops: BTreeMap<String, LatencySummary>,
+    /// The end-to-end figure split by stage of the chain, in order
+    /// (`analysis::metrics::CHAIN_STAGES`): every vehicle's chains merged.
+    #[serde(default)]
+    pub chain: Vec<ChainStage>,
+    /// Camera frame (the `world` snapshot the sensors saw) → thrust applied:
+    /// the chain without its first stage, per chain.
+    #[serde(default)]
+    pub frame_to_thrust: LatencySummary,
+}
+
+/// One stage of the sensor → thrust chain: from the previous stage's output
+/// to its own, µs.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ChainStage {
+    /// `world`, `perception`, `planner`, `mpc` or `sim-plant` (thrust applied).
+    pub stage: String,
+    /// Its latency over every chain.
+    #[serde(flatten)]
+    pub us: LatencySummary,
 }
 
 /// The predictive controllers.
@@ -400,6 +419,7 @@ pub fn summarize(
             .and_then(|v| v.parse().ok())
             .unwrap_or(0)
     };
+    let (chain_stages, frame_to_thrust) = chain(scenario, rec);
     let mut s = Summary {
         schema_version: SCHEMA_VERSION,
         scenario: scenario.name.clone(),
@@ -425,6 +445,8 @@ pub fn summarize(
         latency_us: Latency {
             end_to_end: end_to_end(scenario, rec),
             hops: runtime.hops,
+            chain: chain_stages,
+            frame_to_thrust,
         },
         deadline_misses: runtime.deadline_misses,
         step_us: runtime.step_us,

@@ -51,8 +51,9 @@ pub struct RunBenchCmd {
     /// polls this long for its next wake-up before blocking).
     #[arg(long, default_value_t = 50)]
     pub spin_us: u64,
-    /// Simulated (= wall) seconds of the realtime run; the scenario's
-    /// duration if shorter. 0 skips the realtime run.
+    /// Simulated (= wall) seconds of each wall-clock run (one on phased
+    /// timers, `realtime`, one driven by data, `dataflow`); the scenario's
+    /// duration if shorter. 0 skips them.
     #[arg(long, default_value_t = 60.0)]
     pub realtime_duration: f64,
     /// Simulated seconds of each lockstep run (default: the scenario's).
@@ -270,9 +271,14 @@ fn render_realtime(s: &Summary) -> String {
         "{:>10} {:>10} {:>10} {:>10} {:>8}",
         "p50", "p99", "p99.9", "max", "count"
     );
+    let how = match s.mode.as_str() {
+        "dataflow" => "each stage woken by its inputs",
+        _ => "phased timers",
+    };
     let _ = writeln!(
         out,
-        "realtime: {} s on the wall clock ({:.1} s wall)",
+        "{}: {} s on the wall clock, {how} ({:.1} s wall)",
+        s.mode,
         fmt_num(s.sim_time_s),
         s.wall_time_s
     );
@@ -285,9 +291,23 @@ fn render_realtime(s: &Summary) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<26}(camera frame or sonar ping -> thrust applied by sim-plant)",
+        "{:<26}(plant's truth -> thrust applied by sim-plant)",
         ""
     );
+    let _ = writeln!(
+        out,
+        "{:<26}{}",
+        "camera frame -> thrust",
+        latency_cells(&s.latency_us.frame_to_thrust)
+    );
+    for c in &s.latency_us.chain {
+        let _ = writeln!(
+            out,
+            "{:<26}{}",
+            format!("  stage {}", c.stage),
+            latency_cells(&c.us)
+        );
+    }
     let kinds: BTreeSet<&String> = s
         .deadline_misses
         .keys()
@@ -411,15 +431,20 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
     let realtime = if cmd.realtime_duration > 0.0 {
         let mut rt = scenario.clone();
         rt.duration_s = rt.duration_s.min(cmd.realtime_duration);
-        eprintln!(
-            "  realtime: {} s on the wall clock ...",
-            fmt_num(rt.duration_s)
-        );
-        let settings = cmd.processes.settings(Mode::Realtime, true)?;
-        let (summary, _) = one_run(&rt, &scratch.path.join("realtime"), &settings)?;
-        Some(summary)
+        let mut runs = Vec::new();
+        for mode in [Mode::Realtime, Mode::Dataflow] {
+            eprintln!(
+                "  {}: {} s on the wall clock ...",
+                mode.as_str(),
+                fmt_num(rt.duration_s)
+            );
+            let settings = cmd.processes.settings(mode, true)?;
+            let (summary, _) = one_run(&rt, &scratch.path.join(mode.as_str()), &settings)?;
+            runs.push(summary);
+        }
+        runs
     } else {
-        None
+        Vec::new()
     };
     let load_after = crate::launch::os::load_average();
     let elapsed = started.elapsed().as_secs_f64();
@@ -445,7 +470,7 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
     );
     println!();
     print!("{}", render_lockstep(&variants));
-    if let Some(s) = &realtime {
+    for s in &realtime {
         println!();
         print!("{}", render_realtime(s));
     }
@@ -483,13 +508,14 @@ pub fn run(cmd: RunBenchCmd) -> anyhow::Result<()> {
             "load_average": [load_before, load_after],
             "elapsed_s": elapsed,
             "lockstep": variants.iter().map(variant_json).collect::<Vec<_>>(),
-            "realtime": realtime.as_ref().map(|s| json!({
+            "realtime": realtime.iter().map(|s| json!({
+                "mode": s.mode,
                 "sim_time_s": s.sim_time_s, "wall_time_s": s.wall_time_s,
                 "cpu_time_s": s.cpu_time_s,
                 "latency_us": s.latency_us, "deadline_misses": s.deadline_misses,
                 "wake_late_us": s.wake_late_us, "step_us": s.step_us,
                 "samples_lost": s.samples_lost, "samples_rejected": s.samples_rejected,
-            })),
+            })).collect::<Vec<_>>(),
         });
         std::fs::write(path, serde_json::to_string_pretty(&doc)?)
             .with_context(|| format!("cannot write {}", path.display()))?;
@@ -602,6 +628,7 @@ mod tests {
                     ("truth".to_string(), lat(9.0)),
                 ]
                 .into(),
+                ..Default::default()
             },
             deadline_misses: [("mpc".to_string(), 3), ("world".to_string(), 0)].into(),
             wake_late_us: [("mpc".to_string(), lat(50.0))].into(),

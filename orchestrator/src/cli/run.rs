@@ -22,7 +22,10 @@ pub struct RunCmd {
     #[arg(long)]
     force: bool,
     /// lockstep: deterministic, as fast as the machine allows; realtime: every
-    /// process on its own wall-clock rate.
+    /// process on its own wall-clock rate, phased like a lockstep frame;
+    /// dataflow: on the wall clock, each stage woken by its inputs (camera
+    /// frame → camera-pose → planner → mpc → thrust), the plant applying
+    /// thrust when it comes, the phased timers as deadlines (one host only).
     #[arg(long, value_enum, default_value = "lockstep")]
     mode: Mode,
     /// Seed of every random generator (overrides the scenario's).
@@ -103,6 +106,11 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
         .and_then(crate::hosts::netns::parse_local)
         .transpose()
         .map_err(anyhow::Error::msg)?;
+    if cmd.hosts.is_some() && cmd.mode == Mode::Dataflow {
+        anyhow::bail!(
+            "--mode dataflow runs on one host (its arrival events are iceoryx2's, which the hosts' bridge does not carry): use realtime with --hosts"
+        );
+    }
     if let (Some(path), None) = (&cmd.hosts, local) {
         let file = crate::hosts::HostsFile::load(path)?;
         // Refused here, before anything starts, if it cannot place the group.

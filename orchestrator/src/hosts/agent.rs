@@ -497,7 +497,7 @@ impl Share {
     fn drive(&mut self, sup: &mut Supervisor) -> anyhow::Result<()> {
         match self.mode {
             shoal_runtime::Mode::Lockstep => self.lockstep(sup),
-            shoal_runtime::Mode::Realtime => self.realtime(sup),
+            shoal_runtime::Mode::Realtime | shoal_runtime::Mode::Dataflow => self.realtime(sup),
         }
     }
 

@@ -104,7 +104,9 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
     for (h, o) in placement.hosts.iter().zip(&offsets) {
         tracing::info!(host = %h, offset_us = o.offset_ns as f64 / 1e3, error_us = o.error_ns as f64 / 1e3, "clock offset");
     }
-    let epoch = (opts.mode == shoal_runtime::Mode::Realtime)
+    let epoch = opts
+        .mode
+        .wall_clock()
         .then(|| shoal_runtime::mono_ns() + launch::epoch_margin_ns(scenario.processes().len()));
 
     let (tx, rx) = mpsc::channel();

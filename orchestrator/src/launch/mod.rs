@@ -308,7 +308,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         )?;
         match opts.mode {
             Mode::Lockstep => lockstep(opts, &mut ports, &mut sup, &procs),
-            Mode::Realtime => realtime(opts, &mut ports, &mut sup, &procs, epoch),
+            Mode::Realtime | Mode::Dataflow => realtime(opts, &mut ports, &mut sup, &procs, epoch),
         }
     })();
 

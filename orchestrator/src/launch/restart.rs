@@ -101,6 +101,17 @@ impl Launch {
         }
     }
 
+    /// Offset of `p`'s activations within its period, s: its stage of the
+    /// lockstep frame; in a dataflow run the recorder's timer sits half a
+    /// period after the plants', away from the chain their samples start.
+    fn phase_s(&self, p: &ProcessSpec) -> f64 {
+        let s = &self.scenario;
+        if self.mode == Mode::Dataflow && p.kind == ProcessKind::Recorder {
+            return 0.5 / s.rate_hz(p.kind);
+        }
+        p.phase as f64 * s.rates.tick_s
+    }
+
     /// The command line of `p`'s `restart`-th incarnation.
     pub(crate) fn args(&self, p: &ProcessSpec, restart: u32, resume: Option<&Path>) -> Vec<String> {
         let s = &self.scenario;
@@ -122,7 +133,7 @@ impl Launch {
             "--epoch-mono-ns".into(),
             self.epoch_mono_ns.to_string(),
             "--phase-s".into(),
-            format!("{}", p.phase as f64 * s.rates.tick_s),
+            format!("{}", self.phase_s(p)),
             "--spin-us".into(),
             self.spin_us.to_string(),
             "--scenario".into(),

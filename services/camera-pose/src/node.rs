@@ -27,7 +27,7 @@ use camera_pose::{
     PoseEstimator,
 };
 use camera_pose::{DetectConfig, Detector, Identifier, NoMatch, Prior};
-use ipc_types::{Beacons, Channel, Image, LeaderPose, RunChannel, Sample};
+use ipc_types::{Beacons, Channel, Image, LeaderPose, Sample};
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -37,7 +37,7 @@ use shoal_runtime::{
     ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError, WorldView,
 };
 use shoal_scenario::faults::{Fault, FaultAction};
-use shoal_scenario::Scenario;
+use shoal_scenario::{ProcessKind, Scenario};
 
 /// Where this follower's parent estimate comes from.
 enum Source {
@@ -112,11 +112,13 @@ impl CameraTask {
                 let camera = Camera::new(&cam_cfg)?;
                 let slot = scenario.vehicles[index].slot_m.unwrap_or([0.0; 3]);
                 Source::Image(Box::new(ImageSource {
-                    image_in: rt.subscriber(
-                        &ipc_types::image_service_name(run, me),
-                        &ChannelLimits::image(),
-                        2,
-                    )?,
+                    image_in: {
+                        let name = ipc_types::image_service_name(run, me);
+                        if scenario.same_rate(ProcessKind::CameraPose, ProcessKind::CameraSim) {
+                            rt.wake_on(&name, &ChannelLimits::image())?;
+                        }
+                        rt.subscriber(&name, &ChannelLimits::image(), 2)?
+                    },
                     detector: Detector::new(&detect)?,
                     identifier: Identifier::new(&detect, &layout, &camera, pose_cfg.min_beacons),
                     // The follower in its slot, heading as its parent: the
@@ -146,11 +148,13 @@ impl CameraTask {
             world: if images {
                 None
             } else {
-                Some(WorldView::new(rt.subscriber(
-                    &ipc_types::run_service_name(run, RunChannel::World),
-                    &ChannelLimits::world(scenario.vehicles.len()),
-                    2,
-                )?))
+                // Acoustic fixes come from the modem's own clock, not from a frame.
+                let framed = scenario.method.perception == shoal_scenario::Perception::Camera;
+                Some(WorldView::open(
+                    rt,
+                    scenario.vehicles.len(),
+                    framed && scenario.same_rate(ProcessKind::CameraPose, ProcessKind::World),
+                )?)
             },
             beacons_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Beacons), &lim)?,
             pose_out: rt.publisher(&ipc_types::service_name(run, me, Channel::LeaderPose), &lim)?,

@@ -8,10 +8,10 @@
 use anyhow::Context;
 use camera_pose::{BeaconLayout, CameraConfig, HullConfig};
 use camera_sim::{OpticsConfig, Renderer};
-use ipc_types::{Image, RunChannel};
+use ipc_types::Image;
 use shoal_runtime::convert::seed_for;
 use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Task, TaskError, WorldView};
-use shoal_scenario::Scenario;
+use shoal_scenario::{ProcessKind, Scenario};
 
 pub struct CameraSimTask {
     renderer: Renderer,
@@ -49,11 +49,11 @@ impl CameraSimTask {
             parent,
             seed: seed_for(scenario.seed, index, 4),
             frame: 0,
-            world: WorldView::new(rt.subscriber(
-                &ipc_types::run_service_name(run, RunChannel::World),
-                &ChannelLimits::world(scenario.vehicles.len()),
-                2,
-            )?),
+            world: WorldView::open(
+                rt,
+                scenario.vehicles.len(),
+                scenario.same_rate(ProcessKind::CameraSim, ProcessKind::World),
+            )?,
             image_out: rt.publisher(
                 &ipc_types::image_service_name(run, me),
                 &ChannelLimits::image(),

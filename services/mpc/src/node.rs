@@ -8,7 +8,7 @@ use shoal_runtime::ports::Origin;
 use shoal_runtime::{
     ChannelLimits, Publisher, Runtime, Service, StepContext, Subscriber, Task, TaskError,
 };
-use shoal_scenario::Scenario;
+use shoal_scenario::{ProcessKind, Scenario};
 use sim_plant::model::Vehicle;
 use sim_plant::PlantConfig;
 
@@ -41,15 +41,16 @@ impl<S: Service> MpcTask<S> {
         let vehicle = Vehicle::new(&plant.vehicle)?;
         let run = &rt.args().run_id;
         let lim = ChannelLimits::vehicle();
+        let setpoint = ipc_types::service_name(run, me, Channel::Setpoint);
+        // Dataflow: a control step per new setpoint; nav is read as it stands.
+        if scenario.same_rate(ProcessKind::Mpc, ProcessKind::Planner) {
+            rt.wake_on(&setpoint, &lim)?;
+        }
         Ok(Self {
             mpc: Mpc::new(&cfg, &vehicle)?,
             thrust_max: plant.thrust_max,
             nav_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::Nav), &lim, 4)?,
-            setpoint_in: rt.subscriber(
-                &ipc_types::service_name(run, me, Channel::Setpoint),
-                &lim,
-                4,
-            )?,
+            setpoint_in: rt.subscriber(&setpoint, &lim, 4)?,
             thrust_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Thrust), &lim)?,
             stats_out: rt.publisher(&ipc_types::service_name(run, me, Channel::MpcStats), &lim)?,
             nav: None,

@@ -12,7 +12,7 @@ use shoal_runtime::ports::Origin;
 use shoal_runtime::{
     ChannelLimits, Publisher, Runtime, Service, StepContext, Subscriber, Task, TaskError,
 };
-use shoal_scenario::Scenario;
+use shoal_scenario::{ProcessKind, Scenario};
 
 /// The follower configuration of one vehicle: the scenario's shared
 /// `[follower]` section, its slot, D_min from the safety distance, and the
@@ -120,6 +120,20 @@ impl<S: Service> PlannerTask<S> {
         let spec = scenario.vehicle(me).context("vehicle not in scenario")?;
         let run = &rt.args().run_id;
         let lim = ChannelLimits::vehicle();
+        // Dataflow: a planner step per frame, once the frame's sonar scan
+        // and (a follower with a camera) parent fix are in; nav is read as
+        // it stands (the plant sends it before either).
+        let sonar = ipc_types::service_name(run, me, Channel::Sonar);
+        if scenario.same_rate(ProcessKind::Planner, ProcessKind::Sonar) {
+            rt.wake_on(&sonar, &lim)?;
+        }
+        let pose = ipc_types::service_name(run, me, Channel::LeaderPose);
+        if spec.parent.is_some()
+            && scenario.method.perception == shoal_scenario::Perception::Camera
+            && scenario.same_rate(ProcessKind::Planner, ProcessKind::CameraPose)
+        {
+            rt.wake_on(&pose, &lim)?;
+        }
         let role = if spec.parent.is_none() {
             let mut cfg: LeaderConfig = scenario.section("mission")?;
             cfg.d_min_m = scenario.safety.safe_distance_m;
@@ -151,17 +165,13 @@ impl<S: Service> PlannerTask<S> {
         } else {
             Role::Follower {
                 planner: FollowerPlanner::new(&follower_config(scenario, me)?)?,
-                pose_in: rt.subscriber(
-                    &ipc_types::service_name(run, me, Channel::LeaderPose),
-                    &lim,
-                    4,
-                )?,
+                pose_in: rt.subscriber(&pose, &lim, 4)?,
             }
         };
         Ok(Self {
             role,
             nav_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::Nav), &lim, 4)?,
-            sonar_in: rt.subscriber(&ipc_types::service_name(run, me, Channel::Sonar), &lim, 4)?,
+            sonar_in: rt.subscriber(&sonar, &lim, 4)?,
             setpoint_out: rt
                 .publisher(&ipc_types::service_name(run, me, Channel::Setpoint), &lim)?,
             state_out: rt.publisher(

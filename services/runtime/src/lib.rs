@@ -60,8 +60,13 @@ pub use world::WorldView;
 pub enum Mode {
     /// The orchestrator ticks a clock and waits for every due process.
     Lockstep,
-    /// Each process runs at its own rate on the wall clock.
+    /// Each process runs at its own rate on the wall clock, on phased timers.
     Realtime,
+    /// On the wall clock, driven by data: the plant and the run-level
+    /// processes keep their timers; every other stage steps when a new
+    /// sample has arrived on each of its trigger inputs
+    /// ([`Runtime::wake_on`]), and its phased timer becomes its deadline.
+    Dataflow,
 }
 
 impl Mode {
@@ -70,7 +75,13 @@ impl Mode {
         match self {
             Mode::Lockstep => "lockstep",
             Mode::Realtime => "realtime",
+            Mode::Dataflow => "dataflow",
         }
+    }
+
+    /// True when time is the wall clock's (realtime and dataflow).
+    pub fn wall_clock(self) -> bool {
+        self != Mode::Lockstep
     }
 }
 
@@ -248,6 +259,19 @@ pub struct StepContext {
     pub last: bool,
     /// The run's mode.
     pub mode: Mode,
+    /// What woke the process for this step.
+    pub woken_by: Wake,
+}
+
+/// What woke a process for a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// A lockstep tick, or an activation of the process's timer.
+    Tick,
+    /// Dataflow: a new sample on every trigger input.
+    Input,
+    /// Dataflow: the stage's deadline passed without its inputs.
+    Deadline,
 }
 
 impl StepContext {
@@ -261,6 +285,7 @@ impl StepContext {
             since_last_ns: 0,
             last: false,
             mode: Mode::Realtime,
+            woken_by: Wake::Tick,
         }
     }
 
@@ -331,6 +356,10 @@ pub fn init_tracing() {
 pub struct Runtime<S: Service = ipc::Service> {
     node: Node<S>,
     args: RunArgs,
+    /// Dataflow: the arrival listeners of the trigger inputs.
+    triggers: std::cell::RefCell<Vec<iceoryx2::port::listener::Listener<S>>>,
+    /// Dataflow: the timer keeps stepping besides the triggers (the plant).
+    keep_timer: std::cell::Cell<bool>,
 }
 
 impl Runtime {
@@ -350,6 +379,8 @@ impl<S: Service> Runtime<S> {
         Ok(Self {
             node,
             args: args.clone(),
+            triggers: std::cell::RefCell::new(Vec::new()),
+            keep_timer: std::cell::Cell::new(false),
         })
     }
 
@@ -369,7 +400,38 @@ impl<S: Service> Runtime<S> {
         service: &str,
         limits: &ChannelLimits,
     ) -> Result<Publisher<T, S>, RuntimeError> {
-        Publisher::open(&self.node, service, limits)
+        let p = Publisher::open(&self.node, service, limits)?;
+        if self.args.mode == Mode::Dataflow {
+            return p.announcing(&self.node, limits);
+        }
+        Ok(p)
+    }
+
+    /// Dataflow: makes `service` (opened with `limits`) one of this
+    /// process's trigger inputs. The process then steps once a new sample
+    /// has arrived on every trigger input since its last step; its phased
+    /// timer turns into a deadline, at which it steps with what it has and
+    /// counts a miss. Nothing in the other modes.
+    pub fn wake_on(&self, service: &str, limits: &ChannelLimits) -> Result<(), RuntimeError> {
+        if self.args.mode != Mode::Dataflow {
+            return Ok(());
+        }
+        let listener = open_arrival(&self.node, service, limits)?
+            .listener_builder()
+            .create()
+            .map_err(|e| RuntimeError::Port {
+                service: arrival_service_name(service),
+                source: Box::new(e),
+            })?;
+        self.triggers.borrow_mut().push(listener);
+        Ok(())
+    }
+
+    /// Dataflow: keeps the timer stepping besides the trigger inputs, for a
+    /// process whose own clock is physical (the plant integrates on its
+    /// timer and applies thrust when it comes).
+    pub fn keep_timer(&self) {
+        self.keep_timer.set(true);
     }
 
     /// Opens (or creates) a subscriber on `service` with the given limits.
@@ -395,6 +457,10 @@ impl<S: Service> Runtime<S> {
         let result = match self.args.mode {
             Mode::Lockstep => self.run_lockstep(task, &mut stats, &mut report),
             Mode::Realtime => self.run_realtime(task, &mut stats, &mut report),
+            Mode::Dataflow if self.triggers.borrow().is_empty() => {
+                self.run_realtime(task, &mut stats, &mut report)
+            }
+            Mode::Dataflow => self.run_dataflow(task, &mut stats, &mut report),
         };
         if let Err(e) = stats.write_file(&report) {
             tracing::warn!(%e, "cannot write the stats file");
@@ -520,6 +586,7 @@ impl<S: Service> Runtime<S> {
                     since_last_ns: last_sim.map_or(0, |l| sim.saturating_sub(l)),
                     last: c.last != 0,
                     mode: Mode::Lockstep,
+                    woken_by: Wake::Tick,
                 };
                 last_sim = Some(sim);
                 if let Err(source) = task.step(&ctx) {
@@ -568,20 +635,10 @@ impl<S: Service> Runtime<S> {
         Ok(())
     }
 
-    /// Realtime: activation `k` of this process is due at
-    /// `epoch + phase + k·period` on the monotonic clock; the process sleeps
-    /// until then (`Node::wait`, which returns early on SIGINT/SIGTERM), steps
-    /// with the activation's nominal time as its simulation time, and counts
-    /// a deadline miss for every activation it could not start before the
-    /// next one was due (those are skipped, not run late in a burst).
-    fn run_realtime<T: Task>(
-        &self,
-        mut task: T,
-        stats: &mut stats::StatsReporter<S>,
-        report: &mut RunReport,
-    ) -> Result<(), RuntimeError> {
-        let done = self.done_notifier()?;
-        self.notify_ready(&done)?;
+    /// The phased timer of this process: activation `k` is due at
+    /// `epoch + phase + k·period` on the monotonic clock. A restarted
+    /// process joins at its next activation.
+    fn schedule(&self) -> Schedule {
         let period_ns = (self.args.period_s.max(1e-4) * 1e9).round() as u64;
         let phase_ns = (self.args.phase_s.max(0.0) * 1e9).round() as u64;
         let epoch = if self.args.epoch_mono_ns == 0 {
@@ -589,17 +646,39 @@ impl<S: Service> Runtime<S> {
         } else {
             self.args.epoch_mono_ns
         };
-        // A restarted process joins at its next activation.
-        let mut k = if self.args.restart > 0 {
+        let next = if self.args.restart > 0 {
             mono_ns()
                 .saturating_sub(epoch + phase_ns)
                 .div_ceil(period_ns)
         } else {
             0
         };
-        let mut last_sim: Option<u64> = None;
+        Schedule {
+            period_ns,
+            phase_ns,
+            epoch,
+            next,
+        }
+    }
+
+    /// Realtime: the process sleeps until its next activation
+    /// ([`Runtime::schedule`]; `Node::wait`, which returns early on
+    /// SIGINT/SIGTERM), steps with the activation's nominal time as its
+    /// simulation time, and counts a deadline miss for every activation it
+    /// could not start before the next one was due (those are skipped, not
+    /// run late in a burst).
+    fn run_realtime<T: Task>(
+        &self,
+        task: T,
+        stats: &mut stats::StatsReporter<S>,
+        report: &mut RunReport,
+    ) -> Result<(), RuntimeError> {
+        let done = self.done_notifier()?;
+        self.notify_ready(&done)?;
+        let mut sched = self.schedule();
+        let mut stepper = self.stepper(task, stats, report);
         loop {
-            let due = epoch + phase_ns + k * period_ns;
+            let due = sched.due();
             let now = mono_ns();
             if now < due {
                 match self.node.wait(Duration::from_nanos(due - now)) {
@@ -610,36 +689,197 @@ impl<S: Service> Runtime<S> {
                 }
                 continue;
             }
-            let late = now - due;
-            let skipped = late / period_ns;
-            if skipped > 0 {
-                report.deadline_misses += skipped;
-                k += skipped;
-            }
-            let sim = k * period_ns + phase_ns;
-            stats.wake_late(now - (epoch + sim));
-            let ctx = StepContext {
-                sim_time_ns: sim,
-                tick: k,
-                wake_mono_ns: now,
-                since_last_ns: last_sim.map_or(0, |l| sim.saturating_sub(l)),
-                last: false,
-                mode: Mode::Realtime,
-            };
-            last_sim = Some(sim);
-            k += 1;
-            if let Err(source) = task.step(&ctx) {
-                let _ = task.finish();
-                return Err(RuntimeError::Task {
-                    sim_time_s: ctx.sim_time_s(),
-                    source,
-                });
-            }
-            report.steps += 1;
-            stats.after_step(&ctx, mono_ns().saturating_sub(now), report);
+            let (k, sim, skipped) = sched.activate(now);
+            stepper.report.deadline_misses += skipped;
+            stepper.stats.wake_late(now - (sched.epoch + sim));
+            stepper.step(now, sim, k, Wake::Tick)?;
         }
-        task.finish().map_err(|source| RuntimeError::Task {
-            sim_time_s: last_sim.unwrap_or(0) as f64 * 1e-9,
+        stepper.finish()
+    }
+
+    fn stepper<'a, T: Task>(
+        &self,
+        task: T,
+        stats: &'a mut stats::StatsReporter<S>,
+        report: &'a mut RunReport,
+    ) -> WallStepper<'a, T, S> {
+        WallStepper {
+            task,
+            stats,
+            report,
+            mode: self.args.mode,
+            last_sim: None,
+        }
+    }
+
+    /// Dataflow: the process steps once a new sample has arrived on every
+    /// trigger input since its last step (their arrival events, in one
+    /// WaitSet), with the wall time of the step as its simulation time.
+    /// Activation `k` of its phased timer ([`Runtime::schedule`]) is its
+    /// deadline for frame `k`: a step on input before it stands for the
+    /// frame (the timer then skips to the next activation, so a stage that
+    /// keeps up wakes once per frame); a deadline reached without one is a
+    /// miss, and the process steps with what it has. With
+    /// [`Runtime::keep_timer`] every activation is a step, as in realtime,
+    /// and the triggers add steps of their own.
+    fn run_dataflow<T: Task>(
+        &self,
+        task: T,
+        stats: &mut stats::StatsReporter<S>,
+        report: &mut RunReport,
+    ) -> Result<(), RuntimeError>
+    where
+        iceoryx2::port::listener::Listener<S>: SynchronousMultiplexing,
+    {
+        let done = self.done_notifier()?;
+        self.notify_ready(&done)?;
+        let mut sched = self.schedule();
+        let triggers = self.triggers.borrow();
+        let waitset = WaitSetBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
+            .create::<S>()
+            .map_err(|e| RuntimeError::Wait(Box::new(e)))?;
+        let guards = triggers
+            .iter()
+            .map(|l| waitset.attach_notification(l))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| RuntimeError::Wait(Box::new(e)))?;
+        let keep_timer = self.keep_timer.get();
+        let mut pending = vec![false; triggers.len()];
+        // No miss is counted before the first input arrived.
+        let mut started = false;
+        let mut stepper = self.stepper(task, stats, report);
+        loop {
+            let due = sched.due();
+            let now = mono_ns();
+            if now >= due {
+                let (k, sim, skipped) = sched.activate(now);
+                let wake = if keep_timer {
+                    stepper.report.deadline_misses += skipped;
+                    Wake::Tick
+                } else {
+                    if started {
+                        stepper.report.deadline_misses += skipped + 1;
+                    }
+                    Wake::Deadline
+                };
+                stepper.stats.wake_late(now - (sched.epoch + sim));
+                stepper.step(now, sim, k, wake)?;
+                continue;
+            }
+            let r = waitset.wait_and_process_once_with_timeout(
+                |id| {
+                    for (i, (g, l)) in guards.iter().zip(triggers.iter()).enumerate() {
+                        if id.has_event_from(g) {
+                            let _ = l.try_wait(|_| {});
+                            pending[i] = true;
+                        }
+                    }
+                    CallbackProgression::Continue
+                },
+                Duration::from_nanos(due - now),
+            );
+            match r {
+                Ok(iceoryx2::waitset::WaitSetRunResult::TerminationRequest) => break,
+                Ok(_) => {}
+                Err(e) => {
+                    let _ = stepper.finish();
+                    return Err(RuntimeError::Wait(Box::new(e)));
+                }
+            }
+            if pending.iter().all(|p| *p) {
+                pending.fill(false);
+                started = true;
+                let now = mono_ns();
+                if !keep_timer {
+                    sched.stand_for_frame(now);
+                }
+                let sim = now.saturating_sub(sched.epoch);
+                stepper.step(now, sim, sched.next, Wake::Input)?;
+            }
+        }
+        stepper.finish()
+    }
+}
+
+/// A process's phased timer on the wall clock (realtime and dataflow).
+struct Schedule {
+    period_ns: u64,
+    phase_ns: u64,
+    epoch: u64,
+    /// The next activation.
+    next: u64,
+}
+
+impl Schedule {
+    /// When the next activation is due, monotonic ns.
+    fn due(&self) -> u64 {
+        self.epoch + self.phase_ns + self.next * self.period_ns
+    }
+
+    /// A step on input at `now` stands for the frame whose activation is
+    /// the first due after `now`: the next one due is the frame after it.
+    fn stand_for_frame(&mut self, now: u64) {
+        let first_after = (now + 1)
+            .saturating_sub(self.epoch + self.phase_ns)
+            .div_ceil(self.period_ns);
+        self.next = self.next.max(first_after + 1);
+    }
+
+    /// Takes the latest activation due at `now`: its number, its nominal
+    /// simulation time, and how many activations before it were skipped.
+    fn activate(&mut self, now: u64) -> (u64, u64, u64) {
+        let skipped = now.saturating_sub(self.due()) / self.period_ns;
+        self.next += skipped;
+        let k = self.next;
+        self.next += 1;
+        (k, k * self.period_ns + self.phase_ns, skipped)
+    }
+}
+
+/// Steps a task on the wall clock (realtime and dataflow), keeping its
+/// simulation time monotonic and its statistics.
+struct WallStepper<'a, T: Task, S: Service> {
+    task: T,
+    stats: &'a mut stats::StatsReporter<S>,
+    report: &'a mut RunReport,
+    mode: Mode,
+    last_sim: Option<u64>,
+}
+
+impl<T: Task, S: Service> WallStepper<'_, T, S> {
+    /// One step woken at `now` for simulation time `sim` (held monotonic)
+    /// on activation `tick`; a failed step finishes the task.
+    fn step(&mut self, now: u64, sim: u64, tick: u64, woken_by: Wake) -> Result<(), RuntimeError> {
+        let sim = self.last_sim.map_or(sim, |l| sim.max(l));
+        let ctx = StepContext {
+            sim_time_ns: sim,
+            tick,
+            wake_mono_ns: now,
+            since_last_ns: self.last_sim.map_or(0, |l| sim - l),
+            last: false,
+            mode: self.mode,
+            woken_by,
+        };
+        self.last_sim = Some(sim);
+        if let Err(source) = self.task.step(&ctx) {
+            let _ = self.task.finish();
+            return Err(RuntimeError::Task {
+                sim_time_s: ctx.sim_time_s(),
+                source,
+            });
+        }
+        self.report.steps += 1;
+        self.stats
+            .after_step(&ctx, mono_ns().saturating_sub(now), self.report);
+        Ok(())
+    }
+
+    /// The run ended: the task's finish.
+    fn finish(mut self) -> Result<(), RuntimeError> {
+        let sim = self.last_sim.unwrap_or(0);
+        self.task.finish().map_err(|source| RuntimeError::Task {
+            sim_time_s: sim as f64 * 1e-9,
             source,
         })
     }
@@ -691,6 +931,54 @@ pub fn open_done<S: Service>(
             service: name,
             source: Box::new(e),
         })
+}
+
+/// The event service a dataflow publisher notifies after each send on `service`.
+pub fn arrival_service_name(service: &str) -> String {
+    format!("{service}/arrived")
+}
+
+/// Opens the arrival event service of pub-sub `service` (the publisher's
+/// notifier and the triggered subscribers' listeners; one event id). A
+/// publisher and a subscriber opening it at once may race: retried.
+pub fn open_arrival<S: Service>(
+    node: &Node<S>,
+    service: &str,
+    limits: &ChannelLimits,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<S>, RuntimeError> {
+    use iceoryx2::service::builder::event::{
+        EventCreateError as C, EventOpenError as O, EventOpenOrCreateError as E,
+    };
+    let name = arrival_service_name(service);
+    let sname = service_name(&name)?;
+    let mut attempt = 0;
+    loop {
+        let r = node
+            .service_builder(&sname)
+            .event()
+            .max_notifiers(limits.max_publishers)
+            .max_listeners(limits.max_subscribers)
+            .max_nodes(limits.max_nodes)
+            .event_id_max_value(0)
+            .open_or_create();
+        match r {
+            Ok(f) => return Ok(f),
+            Err(
+                E::SystemInFlux
+                | E::EventOpenError(O::DoesNotExist)
+                | E::EventCreateError(C::AlreadyExists | C::IsBeingCreatedByAnotherInstance),
+            ) if attempt < 200 => {
+                attempt += 1;
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            Err(e) => {
+                return Err(RuntimeError::Service {
+                    service: name,
+                    source: Box::new(e),
+                })
+            }
+        }
+    }
 }
 
 /// Opens one process's lockstep wake-up event service.
@@ -756,4 +1044,50 @@ pub fn node_subscriber<T: ipc_types::Sample, S: Service>(
     buffer: usize,
 ) -> Result<Subscriber<T, S>, RuntimeError> {
     Subscriber::open(node, service, limits, buffer, Mode::Realtime)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Schedule;
+
+    fn schedule() -> Schedule {
+        Schedule {
+            period_ns: 100,
+            phase_ns: 20,
+            epoch: 1_000,
+            next: 0,
+        }
+    }
+
+    #[test]
+    fn an_activation_taken_late_skips_the_ones_it_missed() {
+        let mut s = schedule();
+        assert_eq!(s.due(), 1_020);
+        assert_eq!(s.activate(1_020), (0, 20, 0));
+        assert_eq!(s.due(), 1_120);
+        // 250 late: activations 1 and 2 were missed; 3 runs.
+        assert_eq!(s.activate(1_370), (3, 320, 2));
+        assert_eq!(s.due(), 1_420);
+    }
+
+    #[test]
+    fn a_step_on_input_stands_for_the_next_frame_once() {
+        let mut s = schedule();
+        // Input at 1_005, before activation 0 (1_020): 0 is covered, 1 is next.
+        s.stand_for_frame(1_005);
+        assert_eq!(s.due(), 1_120);
+        // A second input in the same period covers nothing more.
+        s.stand_for_frame(1_019);
+        assert_eq!(s.due(), 1_120);
+        // Input exactly at an activation's time stands for the one after.
+        s.stand_for_frame(1_020);
+        assert_eq!(s.due(), 1_220);
+        // The next period's input covers activation 2.
+        s.stand_for_frame(1_150);
+        assert_eq!(s.due(), 1_320);
+        // Before the epoch: the first activation is covered.
+        let mut early = schedule();
+        early.stand_for_frame(10);
+        assert_eq!(early.due(), 1_120);
+    }
 }

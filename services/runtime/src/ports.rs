@@ -180,6 +180,10 @@ pub struct Publisher<T: Sample, S: Service = ipc::Service> {
     factory: iceoryx2::service::port_factory::publish_subscribe::PortFactory<S, T, ()>,
     service: String,
     seq: u64,
+    /// Dataflow: notifies the service's arrival event after every send, so
+    /// that the stages triggered by it wake ([`crate::Runtime::wake_on`]).
+    /// Boxed: a notifier is large, and most publishers have none.
+    arrival: Option<Box<iceoryx2::port::notifier::Notifier<S>>>,
 }
 
 impl<T: Sample, S: Service> Publisher<T, S> {
@@ -202,7 +206,38 @@ impl<T: Sample, S: Service> Publisher<T, S> {
             factory,
             service: service.to_string(),
             seq: 0,
+            arrival: None,
         })
+    }
+
+    /// Announces every send on the service's arrival event (dataflow mode).
+    pub(crate) fn announcing(
+        mut self,
+        node: &Node<S>,
+        limits: &ChannelLimits,
+    ) -> Result<Self, RuntimeError> {
+        let name = crate::arrival_service_name(&self.service);
+        let notifier = crate::open_arrival(node, &self.service, limits)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| RuntimeError::Port {
+                service: name,
+                source: Box::new(e),
+            })?;
+        self.arrival = Some(Box::new(notifier));
+        Ok(self)
+    }
+
+    /// Counts a sample sent and wakes the stages it triggers.
+    fn sent(&mut self) -> Result<(), RuntimeError> {
+        self.seq += 1;
+        if let Some(n) = &self.arrival {
+            n.notify().map_err(|e| RuntimeError::Io {
+                service: crate::arrival_service_name(&self.service),
+                source: Box::new(e),
+            })?;
+        }
+        Ok(())
     }
 
     /// The service name.
@@ -241,8 +276,7 @@ impl<T: Sample, S: Service> Publisher<T, S> {
         let mut out = loan.write_payload(sample);
         self.stamp(out.payload_mut().header_mut(), ctx, origin, publish_mono_ns);
         out.send().map_err(|e| self.send_error(e))?;
-        self.seq += 1;
-        Ok(())
+        self.sent()
     }
 
     /// Writes this publisher's stamps into a header about to be sent.
@@ -277,8 +311,7 @@ impl<T: Sample, S: Service> Publisher<T, S> {
         }
         self.stamp(out.payload_mut().header_mut(), ctx, origin, mono_ns());
         out.send().map_err(|e| self.send_error(e))?;
-        self.seq += 1;
-        Ok(())
+        self.sent()
     }
 
     /// Sends a sample whose header `fill` writes itself (replay of a
@@ -290,8 +323,7 @@ impl<T: Sample, S: Service> Publisher<T, S> {
         let mut out = self.loan_in_place()?;
         fill(out.payload_mut());
         out.send().map_err(|e| self.send_error(e))?;
-        self.seq += 1;
-        Ok(())
+        self.sent()
     }
 
     /// A loaned chunk to write a sample into where it lies.
@@ -334,8 +366,7 @@ impl<T: Sample, S: Service> Publisher<T, S> {
         self.inner
             .send_copy(sample)
             .map_err(|e| self.send_error(e))?;
-        self.seq += 1;
-        Ok(())
+        self.sent()
     }
 }
 
@@ -466,7 +497,7 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
     }
 
     fn ready(&self, ctx: &StepContext, s: &T) -> bool {
-        self.mode == Mode::Realtime || s.header().sim_time_ns < ctx.sim_time_ns
+        self.mode.wall_clock() || s.header().sim_time_ns < ctx.sim_time_ns
     }
 
     /// Hands the held samples that are ready to `f`, oldest first, up to the
@@ -651,6 +682,7 @@ mod tests {
             since_last_ns: 0,
             last: false,
             mode: Mode::Lockstep,
+            woken_by: crate::Wake::Tick,
         }
     }
 

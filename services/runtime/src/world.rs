@@ -7,7 +7,7 @@ use nalgebra::Isometry3;
 
 use crate::convert::world_pose;
 use crate::ports::Origin;
-use crate::{RuntimeError, StepContext, Subscriber};
+use crate::{ChannelLimits, Runtime, RuntimeError, StepContext, Subscriber};
 
 /// The newest world snapshot's poses and origin.
 pub struct WorldView {
@@ -24,6 +24,19 @@ impl WorldView {
             poses: Vec::new(),
             origin: None,
         }
+    }
+
+    /// Subscribes `rt` to the run's `world` channel (a run of `vehicles`);
+    /// with `triggered`, a dataflow run steps the process on each snapshot
+    /// ([`Runtime::wake_on`]).
+    pub fn open(rt: &Runtime, vehicles: usize, triggered: bool) -> Result<Self, RuntimeError> {
+        let name = ipc_types::run_service_name(&rt.args().run_id, ipc_types::RunChannel::World);
+        let limits = ChannelLimits::world(vehicles);
+        let sub = rt.subscriber(&name, &limits, 2)?;
+        if triggered {
+            rt.wake_on(&name, &limits)?;
+        }
+        Ok(Self::new(sub))
     }
 
     /// Reads the newest ready snapshot, if one arrived, where it lies;

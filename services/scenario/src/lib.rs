@@ -1080,6 +1080,13 @@ impl Scenario {
         (1.0 / (hz * self.rates.tick_s)).round().max(1.0) as u64
     }
 
+    /// True when `stage` runs at the rate of `input`, the kind that feeds
+    /// it: in a dataflow run it then steps on `input`'s samples (one per
+    /// frame) rather than on its own timer.
+    pub fn same_rate(&self, stage: ProcessKind, input: ProcessKind) -> bool {
+        self.rate_hz(stage) == self.rate_hz(input)
+    }
+
     /// Rate of a process kind, Hz.
     pub fn rate_hz(&self, kind: ProcessKind) -> f64 {
         let r = &self.rates;

@@ -5,7 +5,9 @@ use ipc_types::{Channel, Nav, Sample, Thrust, Truth};
 use nalgebra::{UnitQuaternion, Vector3, Vector6};
 use shoal_runtime::convert::{arr, seed_for, wxyz};
 use shoal_runtime::ports::Origin;
-use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
+use shoal_runtime::{
+    ChannelLimits, Mode, Publisher, Runtime, StepContext, Subscriber, Task, TaskError, Wake,
+};
 use shoal_scenario::Scenario;
 use sim_plant::nav::{NavConfig, NavSensor};
 use sim_plant::{Plant, PlantConfig, PlantState};
@@ -23,6 +25,9 @@ pub struct PlantTask {
     period_s: f64,
     /// A restarted plant: simulated time of the `truth` it resumed from.
     resumed_from_ns: Option<u64>,
+    /// Dataflow: simulated time of the plant's state, ns (it integrates up
+    /// to each step's time, whatever woke it).
+    state_ns: Option<u64>,
 }
 
 /// Most plant periods a restarted plant catches up on (realtime: the
@@ -85,15 +90,16 @@ impl PlantTask {
         }
         let run = &rt.args().run_id;
         let lim = ChannelLimits::vehicle();
+        // Dataflow: thrust is applied when it arrives; truth and nav go out
+        // on the plant's own clock.
+        let thrust = ipc_types::service_name(run, me, Channel::Thrust);
+        rt.wake_on(&thrust, &lim)?;
+        rt.keep_timer();
         Ok(Self {
             plant: Plant::new(&cfg, initial)?,
             nav: NavSensor::new(&nav_cfg, seed_for(scenario.seed, index, 1))?,
             is_leader: spec.parent.is_none(),
-            thrust_in: rt.subscriber(
-                &ipc_types::service_name(run, me, Channel::Thrust),
-                &lim,
-                4,
-            )?,
+            thrust_in: rt.subscriber(&thrust, &lim, 4)?,
             truth_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Truth), &lim)?,
             nav_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Nav), &lim)?,
             tau,
@@ -101,6 +107,7 @@ impl PlantTask {
             thrust_applied_mono_ns: 0,
             period_s: 1.0 / scenario.rates.plant_hz,
             resumed_from_ns: resumed.map(|t| t.header.sim_time_ns),
+            state_ns: None,
         })
     }
 }
@@ -118,11 +125,55 @@ impl Task for PlantTask {
                     .map_err(TaskError::failed("plant step"))?;
             }
         }
+        if ctx.mode == Mode::Dataflow {
+            return self.step_dataflow(ctx);
+        }
+        self.take_thrust(ctx)?;
+        self.publish(ctx)?;
+        let dt = match ctx.mode {
+            Mode::Lockstep => self.period_s,
+            Mode::Realtime | Mode::Dataflow => ctx.since_last_ns as f64 * 1e-9,
+        };
+        self.advance(dt)
+    }
+}
+
+impl PlantTask {
+    /// Takes the newest thrust, if one came, and applies it from now on.
+    fn take_thrust(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
         if let Some(t) = self.thrust_in.latest(ctx)? {
             self.tau = Vector6::from(t.tau);
             self.thrust_origin_mono_ns = t.header.origin_mono_ns;
             self.thrust_applied_mono_ns = shoal_runtime::mono_ns();
         }
+        Ok(())
+    }
+
+    fn advance(&mut self, dt: f64) -> Result<(), TaskError> {
+        if dt > 0.0 {
+            self.plant
+                .advance(&self.tau, dt)
+                .map_err(TaskError::failed("plant step"))?;
+        }
+        Ok(())
+    }
+
+    /// Dataflow: the state is carried to this step's time on the thrust
+    /// applied so far; then a new thrust takes effect at once, and on the
+    /// plant's own clock its truth and nav go out.
+    fn step_dataflow(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
+        let from = *self.state_ns.get_or_insert(ctx.sim_time_ns);
+        self.advance(ctx.sim_time_ns.saturating_sub(from) as f64 * 1e-9)?;
+        self.state_ns = Some(ctx.sim_time_ns.max(from));
+        self.take_thrust(ctx)?;
+        if ctx.woken_by == Wake::Input {
+            return Ok(());
+        }
+        self.publish(ctx)
+    }
+
+    /// Publishes the state as truth and as the vehicle's own nav sensor.
+    fn publish(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
         let applied = self.plant.saturate(&self.tau);
         let s = *self.plant.state();
         let (r, p, y) = s.euler_rpy();
@@ -151,16 +202,6 @@ impl Task for PlantTask {
             nav.position_valid = 1;
         }
         self.nav_out.publish(nav, ctx, here)?;
-
-        let dt = match ctx.mode {
-            shoal_runtime::Mode::Lockstep => self.period_s,
-            shoal_runtime::Mode::Realtime => ctx.since_last_ns as f64 * 1e-9,
-        };
-        if dt > 0.0 {
-            self.plant
-                .advance(&self.tau, dt)
-                .map_err(TaskError::failed("plant step"))?;
-        }
         Ok(())
     }
 }

@@ -1,13 +1,13 @@
 //! Wiring of the sonar library to its channels.
 
 use anyhow::Context;
-use ipc_types::{Channel, RunChannel, Sample};
+use ipc_types::{Channel, Sample};
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use shoal_runtime::convert::seed_for;
 use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Task, TaskError, WorldView};
-use shoal_scenario::Scenario;
+use shoal_scenario::{ProcessKind, Scenario};
 use sonar::{Obstacle, ObstacleField, Sonar, SonarConfig};
 
 pub struct SonarTask {
@@ -34,11 +34,11 @@ impl SonarTask {
             field: ObstacleField::new(&obstacles)?,
             index,
             rng: ChaCha8Rng::seed_from_u64(seed_for(scenario.seed, index, 2)),
-            world: WorldView::new(rt.subscriber(
-                &ipc_types::run_service_name(run, RunChannel::World),
-                &ChannelLimits::world(scenario.vehicles.len()),
-                2,
-            )?),
+            world: WorldView::open(
+                rt,
+                scenario.vehicles.len(),
+                scenario.same_rate(ProcessKind::Sonar, ProcessKind::World),
+            )?,
             out: rt.publisher(
                 &ipc_types::service_name(run, me, Channel::Sonar),
                 &ChannelLimits::vehicle(),

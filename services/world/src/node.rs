@@ -5,7 +5,7 @@ use shoal_runtime::ports::Origin;
 use shoal_runtime::{
     ChannelLimits, Publisher, Runtime, RuntimeError, StepContext, Subscriber, Task, TaskError,
 };
-use shoal_scenario::Scenario;
+use shoal_scenario::{ProcessKind, Scenario};
 
 pub struct WorldTask {
     truths: Vec<Subscriber<Truth>>,
@@ -21,6 +21,11 @@ impl WorldTask {
         for v in &scenario.vehicles {
             let name = ipc_types::service_name(run, &v.name, Channel::Truth);
             truths.push(rt.subscriber::<Truth>(&name, &ChannelLimits::vehicle(), 4)?);
+            // Dataflow: the snapshot goes out once every vehicle's truth of
+            // the frame is in (a dead plant's is waited for until the deadline).
+            if scenario.same_rate(ProcessKind::World, ProcessKind::SimPlant) {
+                rt.wake_on(&name, &ChannelLimits::vehicle())?;
+            }
         }
         let out = rt.publisher::<World>(
             &ipc_types::run_service_name(run, RunChannel::World),
