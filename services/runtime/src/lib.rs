@@ -735,15 +735,18 @@ impl<S: Service> Runtime<S> {
         self.notify_ready(&done)?;
         let mut sched = self.schedule();
         let triggers = self.triggers.borrow();
-        let waitset = WaitSetBuilder::new()
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<S>()
-            .map_err(|e| RuntimeError::Wait(Box::new(e)))?;
-        let guards = triggers
+        // ppoll(2) on the listeners' sockets, not a WaitSet: its timeout is
+        // in nanoseconds, where epoll's whole milliseconds would wake the
+        // plants up to 1 ms late, each by a different amount.
+        let mut fds: Vec<libc::pollfd> = triggers
             .iter()
-            .map(|l| waitset.attach_notification(l))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| RuntimeError::Wait(Box::new(e)))?;
+            .map(|l| libc::pollfd {
+                fd: listener_fd(l),
+                events: libc::POLLIN,
+                revents: 0,
+            })
+            .collect();
+        set_timer_slack_ns(1_000);
         let keep_timer = self.keep_timer.get();
         let mut pending = vec![false; triggers.len()];
         // No miss is counted before the first input arrived.
@@ -767,21 +770,23 @@ impl<S: Service> Runtime<S> {
                 stepper.step(now, sim, k, wake)?;
                 continue;
             }
-            let r = waitset.wait_and_process_once_with_timeout(
-                |id| {
-                    for (i, (g, l)) in guards.iter().zip(triggers.iter()).enumerate() {
-                        if id.has_event_from(g) {
+            match poll_until(&mut fds, due - now) {
+                Ok(true) => {
+                    for (i, (f, l)) in fds.iter().zip(triggers.iter()).enumerate() {
+                        if f.revents != 0 {
                             let _ = l.try_wait(|_| {});
                             pending[i] = true;
                         }
                     }
-                    CallbackProgression::Continue
-                },
-                Duration::from_nanos(due - now),
-            );
-            match r {
-                Ok(iceoryx2::waitset::WaitSetRunResult::TerminationRequest) => break,
-                Ok(_) => {}
+                }
+                Ok(false) => {
+                    // The timeout, or a signal: a termination request ends the run.
+                    if let Err(iceoryx2::node::NodeWaitFailure::TerminationRequest) =
+                        self.node.wait(Duration::ZERO)
+                    {
+                        break;
+                    }
+                }
                 Err(e) => {
                     let _ = stepper.finish();
                     return Err(RuntimeError::Wait(Box::new(e)));
@@ -799,6 +804,61 @@ impl<S: Service> Runtime<S> {
             }
         }
         stepper.finish()
+    }
+}
+
+/// The socket an iceoryx2 event listener wakes up on.
+fn listener_fd<S: Service>(l: &iceoryx2::port::listener::Listener<S>) -> i32
+where
+    iceoryx2::port::listener::Listener<S>: SynchronousMultiplexing,
+{
+    #[allow(unsafe_code)]
+    // SAFETY: the descriptor stays owned by the listener, which outlives
+    // every poll of it; it is only polled.
+    unsafe {
+        l.file_descriptor().native_handle()
+    }
+}
+
+/// Waits until one of `fds` is readable (`Ok(true)`, with `revents` set) or
+/// `timeout_ns` has passed or a signal came (`Ok(false)`).
+fn poll_until(fds: &mut [libc::pollfd], timeout_ns: u64) -> std::io::Result<bool> {
+    let ts = libc::timespec {
+        tv_sec: (timeout_ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (timeout_ns % 1_000_000_000) as libc::c_long,
+    };
+    #[allow(unsafe_code)]
+    // SAFETY: `fds` and `ts` live across the call; no signal mask is passed.
+    let n = unsafe {
+        libc::ppoll(
+            fds.as_mut_ptr(),
+            fds.len() as libc::nfds_t,
+            &ts,
+            std::ptr::null(),
+        )
+    };
+    match n {
+        -1 => {
+            let e = std::io::Error::last_os_error();
+            if e.kind() == std::io::ErrorKind::Interrupted {
+                Ok(false)
+            } else {
+                Err(e)
+            }
+        }
+        0 => Ok(false),
+        _ => Ok(true),
+    }
+}
+
+/// Lets this thread's timed waits end at most `ns` after they are due
+/// (Linux's default slack is 50 µs; a realtime stage wants its deadline).
+fn set_timer_slack_ns(ns: u64) {
+    #[allow(unsafe_code)]
+    // SAFETY: PR_SET_TIMERSLACK takes one integer argument and touches no memory.
+    let r = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, ns as libc::c_ulong, 0, 0, 0) };
+    if r != 0 {
+        tracing::debug!(error = %std::io::Error::last_os_error(), "cannot set the timer slack");
     }
 }
 
