@@ -217,6 +217,22 @@ fn key_figures(s: &Summary) -> Vec<(&'static str, &'static str, String, Option<b
         ),
         (
             "software",
+            "camera frame to thrust p50 / p99 (stages, p50)",
+            format!(
+                "{:.0} / {:.0} µs ({})",
+                s.latency_us.frame_to_thrust.p50,
+                s.latency_us.frame_to_thrust.p99,
+                s.latency_us
+                    .chain
+                    .iter()
+                    .map(|c| format!("{} {:.0}", c.stage, c.us.p50))
+                    .collect::<Vec<_>>()
+                    .join(" · ")
+            ),
+            None,
+        ),
+        (
+            "software",
             "MPC solve p50 / p99",
             if s.mpc.solves > 0 {
                 format!(
