@@ -255,9 +255,10 @@ fn assert_chain_stages(s: &serde_json::Value) {
 fn a_dataflow_run_steps_each_stage_on_its_inputs_and_counts_the_deadlines_it_misses() {
     let tmp = tempfile::tempdir().unwrap();
     // F1's camera loses every frame from 2 to 6 s: its planner gets no
-    // parent fix for 40 frames, and steps at its deadlines instead.
+    // parent fix for 40 frames, and steps at its deadlines instead. F2's
+    // plant is killed at 4 s and restarted, on the wall clock.
     let text = format!(
-        "{}\n[[faults]]\naction = \"drop\"\nvehicle = \"F1\"\nfrom_s = 2.0\nto_s = 6.0\nfraction = 1.0\n",
+        "{}\n[supervision]\npolicy = \"restart\"\n\n[[faults]]\naction = \"drop\"\nvehicle = \"F1\"\nfrom_s = 2.0\nto_s = 6.0\nfraction = 1.0\n\n[[faults]]\naction = \"kill\"\nvehicle = \"F2\"\nprocess = \"sim-plant\"\nat_s = 4.0\n",
         small_scenario("df", 8.0)
     );
     let scenario = write_scenario(tmp.path(), "df.toml", &text);
@@ -297,4 +298,28 @@ fn a_dataflow_run_steps_each_stage_on_its_inputs_and_counts_the_deadlines_it_mis
         during >= 25,
         "F1's planner published {during} setpoints in 3 s without a fix"
     );
+    // The kill struck, and the plant came back.
+    let events: Vec<(&str, &str)> = s["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            (
+                e["event"].as_str().unwrap(),
+                e["process"].as_str().unwrap_or(""),
+            )
+        })
+        .collect();
+    for want in [
+        "fault_injected",
+        "process_died",
+        "process_restarted",
+        "process_ready",
+    ] {
+        assert!(
+            events.contains(&(want, "F2/sim-plant")),
+            "no {want} for F2/sim-plant: {events:?}"
+        );
+    }
+    assert_domain_clean(s["run_id"].as_str().unwrap());
 }

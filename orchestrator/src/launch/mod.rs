@@ -584,10 +584,21 @@ fn realtime(
     let _tick = waitset
         .attach_interval(Duration::from_millis(100))
         .context("waitset")?;
+    // Kills and stalls strike on the wall clock, within this loop's 100 ms.
+    let injections = injections(scenario);
+    let mut next_injection = 0;
     loop {
         let now = shoal_runtime::mono_ns();
         if now >= end {
             break;
+        }
+        let sim = now.saturating_sub(epoch);
+        while let Some((_, fault)) = injections
+            .get(next_injection)
+            .filter(|(_, f)| f.at_s.is_some_and(|at| at * 1e9 <= sim as f64))
+        {
+            inject(fault, procs, sup, &mut ports.journal, sim);
+            next_injection += 1;
         }
         let r = waitset
             .wait_and_process_once_with_timeout(
