@@ -142,7 +142,7 @@ impl Ports {
             .listener_builder()
             .create()
             .context("done listener")?;
-        let done_fd = sys::listener_fd(&done);
+        let done_fd = shoal_runtime::listener_fd(&done);
         let mut wakes = Vec::with_capacity(procs.len());
         for p in procs {
             if !local(p) {

@@ -97,36 +97,16 @@ pub fn wake_up_cpu_us(rounds: u32) -> std::io::Result<f64> {
     Ok(cpu * 1e6 / (2.0 * f64::from(rounds.max(1))))
 }
 
-/// The socket an iceoryx2 event listener wakes up on.
-pub fn listener_fd(l: &iceoryx2::port::listener::Listener<iceoryx2::prelude::ipc::Service>) -> i32 {
-    use iceoryx2::prelude::FileDescriptorBased;
-    // SAFETY: the descriptor stays owned by the listener; it is only polled.
-    unsafe { l.file_descriptor().native_handle() }
-}
-
 /// Waits until `fd` is readable or `timeout` has passed: `Ok(true)` if it
 /// is, `Ok(false)` on the timeout or a signal (the caller checks for a
 /// termination request).
 pub fn wait_readable(fd: i32, timeout: std::time::Duration) -> std::io::Result<bool> {
-    let mut p = libc::pollfd {
+    let mut p = [libc::pollfd {
         fd,
         events: libc::POLLIN,
         revents: 0,
-    };
-    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
-    // SAFETY: one pollfd that lives across the call.
-    match unsafe { libc::poll(&mut p, 1, ms) } {
-        -1 => {
-            let e = std::io::Error::last_os_error();
-            if e.kind() == std::io::ErrorKind::Interrupted {
-                Ok(false)
-            } else {
-                Err(e)
-            }
-        }
-        0 => Ok(false),
-        _ => Ok(true),
-    }
+    }];
+    shoal_runtime::poll_until(&mut p, timeout.as_nanos().min(u64::MAX as u128) as u64)
 }
 
 /// Makes the child receive SIGTERM if the orchestrator dies, so no

@@ -807,8 +807,8 @@ impl<S: Service> Runtime<S> {
     }
 }
 
-/// The socket an iceoryx2 event listener wakes up on.
-fn listener_fd<S: Service>(l: &iceoryx2::port::listener::Listener<S>) -> i32
+/// The socket an iceoryx2 event listener wakes up on (to poll it).
+pub fn listener_fd<S: Service>(l: &iceoryx2::port::listener::Listener<S>) -> i32
 where
     iceoryx2::port::listener::Listener<S>: SynchronousMultiplexing,
 {
@@ -821,8 +821,9 @@ where
 }
 
 /// Waits until one of `fds` is readable (`Ok(true)`, with `revents` set) or
-/// `timeout_ns` has passed or a signal came (`Ok(false)`).
-fn poll_until(fds: &mut [libc::pollfd], timeout_ns: u64) -> std::io::Result<bool> {
+/// `timeout_ns` has passed or a signal came (`Ok(false)`): ppoll(2), whose
+/// timeout is in nanoseconds.
+pub fn poll_until(fds: &mut [libc::pollfd], timeout_ns: u64) -> std::io::Result<bool> {
     let ts = libc::timespec {
         tv_sec: (timeout_ns / 1_000_000_000) as libc::time_t,
         tv_nsec: (timeout_ns % 1_000_000_000) as libc::c_long,
