@@ -713,8 +713,8 @@ impl<S: Service> Runtime<S> {
     }
 
     /// Dataflow: the process steps once a new sample has arrived on every
-    /// trigger input since its last step (their arrival events, in one
-    /// WaitSet), with the wall time of the step as its simulation time.
+    /// trigger input since its last step (their arrival events, polled
+    /// together), with the wall time of the step as its simulation time.
     /// Activation `k` of its phased timer ([`Runtime::schedule`]) is its
     /// deadline for frame `k`: a step on input before it stands for the
     /// frame (the timer then skips to the next activation, so a stage that
@@ -1012,34 +1012,29 @@ pub fn open_arrival<S: Service>(
     };
     let name = arrival_service_name(service);
     let sname = service_name(&name)?;
-    let mut attempt = 0;
-    loop {
-        let r = node
-            .service_builder(&sname)
-            .event()
-            .max_notifiers(limits.max_publishers)
-            .max_listeners(limits.max_subscribers)
-            .max_nodes(limits.max_nodes)
-            .event_id_max_value(0)
-            .open_or_create();
-        match r {
-            Ok(f) => return Ok(f),
-            Err(
+    ports::open_retrying(
+        || {
+            node.service_builder(&sname)
+                .event()
+                .max_notifiers(limits.max_publishers)
+                .max_listeners(limits.max_subscribers)
+                .max_nodes(limits.max_nodes)
+                .event_id_max_value(0)
+                .open_or_create()
+        },
+        |e| {
+            matches!(
+                e,
                 E::SystemInFlux
-                | E::EventOpenError(O::DoesNotExist)
-                | E::EventCreateError(C::AlreadyExists | C::IsBeingCreatedByAnotherInstance),
-            ) if attempt < 200 => {
-                attempt += 1;
-                std::thread::sleep(Duration::from_millis(10));
-            }
-            Err(e) => {
-                return Err(RuntimeError::Service {
-                    service: name,
-                    source: Box::new(e),
-                })
-            }
-        }
-    }
+                    | E::EventOpenError(O::DoesNotExist)
+                    | E::EventCreateError(C::AlreadyExists | C::IsBeingCreatedByAnotherInstance)
+            )
+        },
+    )
+    .map_err(|e| RuntimeError::Service {
+        service: name,
+        source: Box::new(e),
+    })
 }
 
 /// Opens one process's lockstep wake-up event service.

@@ -117,34 +117,44 @@ fn open_pubsub<T: Sample, S: Service>(
 ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<S, T, ()>, RuntimeError>
 {
     let name = service_name(service)?;
-    // Two processes opening a new service at once race inside
-    // `open_or_create` (one sees it half-created: `DoesNotExist` or
-    // `IsBeingCreatedByAnotherInstance`); a short retry settles it.
+    open_retrying(
+        || {
+            node.service_builder(&name)
+                .publish_subscribe::<T>()
+                .max_publishers(limits.max_publishers)
+                .max_subscribers(limits.max_subscribers)
+                .max_nodes(limits.max_nodes)
+                .subscriber_max_buffer_size(limits.max_buffer)
+                .history_size(limits.history)
+                .subscriber_max_borrowed_samples(BORROWED_SAMPLES)
+                .enable_safe_overflow(true)
+                .open_or_create()
+        },
+        transient,
+    )
+    .map_err(|e| RuntimeError::Service {
+        service: service.to_string(),
+        source: Box::new(e),
+    })
+}
+
+/// Runs `open` (a service's `open_or_create`) until it succeeds or fails
+/// with an error that `transient` does not excuse. Two processes opening a
+/// new service at once race inside `open_or_create` (one sees it
+/// half-created: `DoesNotExist` or `IsBeingCreatedByAnotherInstance`); a
+/// short retry settles it.
+pub(crate) fn open_retrying<F, E>(
+    mut open: impl FnMut() -> Result<F, E>,
+    transient: impl Fn(&E) -> bool,
+) -> Result<F, E> {
     let mut attempt = 0;
     loop {
-        let r = node
-            .service_builder(&name)
-            .publish_subscribe::<T>()
-            .max_publishers(limits.max_publishers)
-            .max_subscribers(limits.max_subscribers)
-            .max_nodes(limits.max_nodes)
-            .subscriber_max_buffer_size(limits.max_buffer)
-            .history_size(limits.history)
-            .subscriber_max_borrowed_samples(BORROWED_SAMPLES)
-            .enable_safe_overflow(true)
-            .open_or_create();
-        match r {
-            Ok(f) => return Ok(f),
+        match open() {
             Err(e) if attempt < OPEN_RETRIES && transient(&e) => {
                 attempt += 1;
                 std::thread::sleep(std::time::Duration::from_millis(10));
             }
-            Err(e) => {
-                return Err(RuntimeError::Service {
-                    service: service.to_string(),
-                    source: Box::new(e),
-                })
-            }
+            r => return r,
         }
     }
 }

@@ -120,9 +120,7 @@ impl Task for PlantTask {
             let period_ns = (self.period_s * 1e9).round().max(1.0) as u64;
             let steps = (ctx.sim_time_ns.saturating_sub(from) + period_ns / 2) / period_ns;
             for _ in 0..steps.min(MAX_CATCH_UP_STEPS) {
-                self.plant
-                    .advance(&self.tau, self.period_s)
-                    .map_err(TaskError::failed("plant step"))?;
+                self.advance(self.period_s)?;
             }
         }
         if ctx.mode == Mode::Dataflow {
