@@ -60,6 +60,12 @@ pub struct DetectConfig {
     /// predicted one (square root of the affine map's area ratio) (a farther vehicle's smaller pattern is not the
     /// parent), either way. Default 1.6.
     pub max_scale_ratio: f64,
+    /// Largest roll of the parent's pattern in the image against the
+    /// predicted one (the rotation of the fitted map), degrees. Vehicles
+    /// keep level, so a pattern turned further is a wrong identity: four
+    /// lamps in a near parallelogram fit their own half-turn as well as
+    /// themselves. Default 30.
+    pub max_roll_deg: f64,
 }
 
 impl Default for DetectConfig {
@@ -80,6 +86,7 @@ impl Default for DetectConfig {
             residual_floor_px: 0.75,
             ambiguity_ratio: 2.0,
             max_scale_ratio: 1.6,
+            max_roll_deg: 30.0,
         }
     }
 }
@@ -107,6 +114,12 @@ impl DetectConfig {
         pos("detect.max_jump_m", self.max_jump_m)?;
         pos("detect.max_relative_speed_mps", self.max_relative_speed_mps)?;
         pos("detect.residual_floor_px", self.residual_floor_px)?;
+        if !(self.max_roll_deg > 0.0 && self.max_roll_deg <= 180.0) {
+            return Err(invalid(
+                "detect.max_roll_deg",
+                format!("must be in (0, 180], got {}", self.max_roll_deg),
+            ));
+        }
         if !(self.grow_fraction > 0.0 && self.grow_fraction <= 1.0) {
             return Err(invalid(
                 "detect.grow_fraction",
@@ -492,15 +505,29 @@ impl Identifier {
             ),
             Prior::Nominal => (self.cfg.gate_acquire_px, false),
         };
-        // Which blobs may be which beacon: those within the gate of its
-        // predicted pixel.
+        // Which blobs may be which beacon. A recent fix predicts the
+        // pattern's shape: those within the gate of its predicted pixel. An
+        // old or nominal one predicts its place only, and its view of the
+        // pattern may differ enough that a beacon lands outside its own
+        // gate while the pattern as a whole is inside (a wrong identity
+        // then fits best): the gate bounds the pattern's shift, and a
+        // beacon may be as far again as the pattern's radius.
+        let radius = if rigid {
+            0.0
+        } else {
+            let n = ks.len() as f64;
+            let c = ks.iter().fold([0.0, 0.0], |a, &k| {
+                [a[0] + pred[k][0] / n, a[1] + pred[k][1] / n]
+            });
+            ks.iter().map(|&k| dist(pred[k], c)).fold(0.0, f64::max)
+        };
         let mut options: [Vec<u8>; MAX_BEACONS] = Default::default();
         for &k in &ks {
             options[k] = blobs
                 .iter()
                 .enumerate()
                 .take(u8::MAX as usize)
-                .filter(|(_, b)| dist(b.centroid, pred[k]) <= gate)
+                .filter(|(_, b)| dist(b.centroid, pred[k]) <= gate + radius)
                 .map(|(j, _)| j as u8)
                 .collect();
         }
@@ -517,6 +544,8 @@ impl Identifier {
             options: &options,
             min: self.min_beacons,
             max_scale: self.cfg.max_scale_ratio,
+            max_roll: self.cfg.max_roll_deg.to_radians(),
+            max_shift: gate,
             rigid,
             assign: [u8::MAX; MAX_BEACONS],
             best: Vec::new(),
@@ -567,6 +596,11 @@ struct Search<'a> {
     options: &'a [Vec<u8>; MAX_BEACONS],
     min: usize,
     max_scale: f64,
+    /// Largest rotation of the fitted map, rad.
+    max_roll: f64,
+    /// Largest shift of the matched beacons' centroid from its
+    /// prediction, px.
+    max_shift: f64,
     /// Fit a similarity (shift, scale, roll: the prediction is recent and
     /// good) rather than an affine map (an old or nominal prediction).
     rigid: bool,
@@ -620,18 +654,39 @@ impl Search<'_> {
                 n += 1;
             }
         }
+        let bounds = MapBounds {
+            max_scale: self.max_scale,
+            max_roll: self.max_roll,
+        };
+        let centroid = |x: &[[f64; 2]]| {
+            x.iter().fold([0.0, 0.0], |a, v| {
+                [a[0] + v[0] / n as f64, a[1] + v[1] / n as f64]
+            })
+        };
+        if n == 0 || dist(centroid(&p[..n]), centroid(&q[..n])) > self.max_shift {
+            return None;
+        }
         if self.rigid {
-            similarity_residual(&p[..n], &q[..n], self.max_scale)
+            similarity_residual(&p[..n], &q[..n], &bounds)
         } else {
-            affine_residual(&p[..n], &q[..n], self.max_scale)
+            affine_residual(&p[..n], &q[..n], &bounds)
         }
     }
 }
 
+/// What a fitted map from the predicted pattern to the blobs may do.
+struct MapBounds {
+    /// Largest size ratio either way.
+    max_scale: f64,
+    /// Largest rotation, rad.
+    max_roll: f64,
+}
+
 /// RMS residual of the least-squares similarity (shift, scale, rotation)
-/// taking `p` onto `q`, px; `None` if it is degenerate or scales by more
-/// than `max_scale` either way.
-fn similarity_residual(p: &[[f64; 2]], q: &[[f64; 2]], max_scale: f64) -> Option<f64> {
+/// taking `p` onto `q`, px; `None` if it is degenerate, scales by more
+/// than `max_scale` either way or turns by more than `max_roll`.
+fn similarity_residual(p: &[[f64; 2]], q: &[[f64; 2]], bounds: &MapBounds) -> Option<f64> {
+    let max_scale = bounds.max_scale;
     let n = p.len();
     if n < 2 {
         return None;
@@ -654,7 +709,7 @@ fn similarity_residual(p: &[[f64; 2]], q: &[[f64; 2]], max_scale: f64) -> Option
     }
     let (a, b) = (a / spp, b / spp);
     let scale = a.hypot(b);
-    if !(scale <= max_scale && scale >= 1.0 / max_scale) {
+    if !(scale <= max_scale && scale >= 1.0 / max_scale) || b.atan2(a).abs() > bounds.max_roll {
         return None;
     }
     let mut ss = 0.0;
@@ -668,9 +723,11 @@ fn similarity_residual(p: &[[f64; 2]], q: &[[f64; 2]], max_scale: f64) -> Option
 }
 
 /// RMS residual of the least-squares affine map taking `p` onto `q`, px;
-/// `None` if it is degenerate, mirrors, or scales area by more than
-/// `max_scale²` either way.
-fn affine_residual(p: &[[f64; 2]], q: &[[f64; 2]], max_scale: f64) -> Option<f64> {
+/// `None` if it is degenerate, mirrors, scales area by more than
+/// `max_scale²` either way, or turns by more than `max_roll` (the angle of
+/// the rotation in its polar decomposition).
+fn affine_residual(p: &[[f64; 2]], q: &[[f64; 2]], bounds: &MapBounds) -> Option<f64> {
+    let max_scale = bounds.max_scale;
     let n = p.len();
     if n < 3 {
         return None;
@@ -704,6 +761,11 @@ fn affine_residual(p: &[[f64; 2]], q: &[[f64; 2]], max_scale: f64) -> Option<f64
     let area = a * d - b * c;
     let s2 = max_scale * max_scale;
     if !(area > 0.0 && area <= s2 && area >= 1.0 / s2) {
+        return None;
+    }
+    // With a positive determinant, the nearest rotation to [[a, b], [c, d]]
+    // turns by atan2(c − b, a + d).
+    if (c - b).atan2(a + d).abs() > bounds.max_roll {
         return None;
     }
     let mut ss = 0.0;

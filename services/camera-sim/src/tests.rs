@@ -260,3 +260,25 @@ proptest! {
         }
     }
 }
+
+/// Found by `the_chain_never_guesses_far_off`, with a prior a metre off:
+/// four lamps in a near parallelogram, whose half-turn fits as well as the
+/// pattern (taken, 2.3 m off at 5.6 m); and a close parent seen from aside,
+/// one beacon just outside its gate around the prior, where a wrong
+/// identity fitted best (0.56 m off at 4.5 m).
+#[test]
+fn the_chain_never_guesses_far_off_on_the_cases_it_once_did() {
+    let follower = pose(0.0, 0.0, 10.0, 0.0);
+    for (x, y, z, yaw, dx, dy, must_fix) in [
+        (5.331, -0.879, -1.327, 23.05, -0.431, -0.475, true),
+        (4.2367, 1.0878, -1.1233, 8.624, 0.7466, -0.4520, false),
+    ] {
+        let parent = pose(x, y, 10.0 + z, yaw);
+        let prior = follower.inverse() * pose(x + dx, y + dy, 10.0 + z, yaw + 5.0);
+        let range = (x * x + y * y + z * z).sqrt();
+        match chain_error(&follower, &parent, &prior, 0) {
+            Some(err) => assert!(err < 0.1 * range, "error {err} m at {range} m"),
+            None => assert!(!must_fix, "no fix at {range} m in plain view"),
+        }
+    }
+}
