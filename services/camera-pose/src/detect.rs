@@ -57,8 +57,9 @@ pub struct DetectConfig {
     /// gives no fix. Default 2.
     pub ambiguity_ratio: f64,
     /// Accepted ratio of the parent's pattern's size in the image to the
-    /// predicted one (square root of the affine map's area ratio) (a farther vehicle's smaller pattern is not the
-    /// parent), either way. Default 1.6.
+    /// predicted one (the scale of a similarity fit; the square root of an
+    /// affine one's area ratio), either way: a farther vehicle's smaller
+    /// pattern is not the parent. Default 1.6.
     pub max_scale_ratio: f64,
     /// Largest roll of the parent's pattern in the image against the
     /// predicted one (the rotation of the fitted map), degrees. Vehicles
@@ -66,6 +67,12 @@ pub struct DetectConfig {
     /// lamps in a near parallelogram fit their own half-turn as well as
     /// themselves. Default 30.
     pub max_roll_deg: f64,
+    /// Identifications that explain as many beacons, with a residual
+    /// beyond `ambiguity_ratio` but within this ratio of the best one's,
+    /// are handed on as runners-up for the pose solver to judge with the
+    /// parent's 3D layout: the 2D fit cannot tell a pattern seen edge-on
+    /// from its neighbour's order swapped. Default 4.
+    pub verify_ratio: f64,
 }
 
 impl Default for DetectConfig {
@@ -87,6 +94,7 @@ impl Default for DetectConfig {
             ambiguity_ratio: 2.0,
             max_scale_ratio: 1.6,
             max_roll_deg: 30.0,
+            verify_ratio: 4.0,
         }
     }
 }
@@ -139,6 +147,7 @@ impl DetectConfig {
             ("detect.max_elongation", self.max_elongation),
             ("detect.ambiguity_ratio", self.ambiguity_ratio),
             ("detect.max_scale_ratio", self.max_scale_ratio),
+            ("detect.verify_ratio", self.verify_ratio),
         ] {
             if !(v.is_finite() && v >= 1.0) {
                 return Err(invalid(key, format!("must be >= 1 and finite, got {v}")));
@@ -413,7 +422,16 @@ pub struct Identification {
     /// `None` when the observation is usable; the reason otherwise (then
     /// `observation` has nothing visible).
     pub failure: Option<NoMatch>,
+    /// Other identifications the 2D fit could not rule out (best first),
+    /// the first `runners_up_count` of them: the pose solver judges them
+    /// with the identification ([`crate::PoseEstimator::estimate_among`]).
+    pub runners_up: [BeaconObservation; RUNNERS_UP],
+    /// How many of `runners_up` are set.
+    pub runners_up_count: usize,
 }
+
+/// Most runners-up an identification hands on.
+pub const RUNNERS_UP: usize = 2;
 
 /// Identifies the parent's beacons by the layout's geometry: the beacons
 /// are projected with a predicted pose (the previous fix, or the nominal
@@ -473,6 +491,8 @@ impl Identifier {
             },
             blob_of: [u8::MAX; MAX_BEACONS],
             failure: None,
+            runners_up: [BeaconObservation::default(); RUNNERS_UP],
+            runners_up_count: 0,
         };
         // Predicted pixels of the beacons that should be in view.
         let body_to_cam = self.camera.camera_in_body().inverse();
@@ -573,13 +593,32 @@ impl Identifier {
             out.failure = Some(NoMatch::Ambiguous);
             return out;
         }
-        for k in 0..MAX_BEACONS {
-            if assign[k] != u8::MAX {
-                out.observation.visible[k] = true;
-                out.observation.pixels[k] = blobs[assign[k] as usize].centroid;
+        let count = out.observation.count;
+        let observe = |assign: &[u8; MAX_BEACONS]| {
+            let mut o = BeaconObservation {
+                count,
+                ..BeaconObservation::default()
+            };
+            for k in 0..MAX_BEACONS {
+                if assign[k] != u8::MAX {
+                    o.visible[k] = true;
+                    o.pixels[k] = blobs[assign[k] as usize].centroid;
+                }
             }
-        }
+            o
+        };
+        out.observation = observe(&assign);
         out.blob_of = assign;
+        for &(_, _, a) in cands[1..]
+            .iter()
+            .filter(|&&(m2, r2, _)| {
+                m2 == matched && r2 <= self.cfg.verify_ratio * residual.max(floor)
+            })
+            .take(RUNNERS_UP)
+        {
+            out.runners_up[out.runners_up_count] = observe(&a);
+            out.runners_up_count += 1;
+        }
         out
     }
 }

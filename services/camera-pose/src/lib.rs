@@ -60,7 +60,9 @@ mod poly;
 pub mod acoustic;
 pub use camera::{segment_distance_sq, BeaconObservation, BeaconStatus, Camera, Capsule};
 pub use config::{BeaconLayout, CameraConfig, CameraError, HullConfig, PoseConfig};
-pub use detect::{Blob, DetectConfig, Detector, Identification, Identifier, NoMatch, Prior};
+pub use detect::{
+    Blob, DetectConfig, Detector, Identification, Identifier, NoMatch, Prior, RUNNERS_UP,
+};
 pub use pnp::{follower_in_parent, parent_in_body, PoseEstimate, PoseEstimator, MAX_P3P_TRIPLES};
 
 /// Most beacons on one parent (the IPC `beacons` sample has room for 8).

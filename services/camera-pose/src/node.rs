@@ -302,7 +302,14 @@ impl CameraTask {
             }
             _ => true,
         };
-        let est = self.estimator.estimate(&obs);
+        // The identifier's runners-up are judged by the pose solver (none
+        // after a blinding fault).
+        let others = if fault == FrameFault::Blind {
+            &id.runners_up[..0]
+        } else {
+            &id.runners_up[..id.runners_up_count]
+        };
+        let est = self.estimator.estimate_among(&obs, others);
         let plausible = !est.valid || plausible(&est.parent_in_body);
         if !plausible {
             tracing::debug!(t_s = now, "fix refused: too far from the last one");

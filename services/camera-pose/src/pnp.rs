@@ -251,6 +251,59 @@ impl PoseEstimator {
         t_c - q * self.centroid
     }
 
+    /// Estimates the parent's pose from each of several identifications of
+    /// one frame (the identifier's choice first, then its runners-up) and
+    /// keeps the one the parent's 3D layout explains best. When the best
+    /// two explain it within the ambiguity margin (`ambiguity_chi2` σ² of
+    /// summed squared reprojection error) of each other, the pixels cannot
+    /// tell them apart: no fix, and the previous estimate stays as it was.
+    /// With one identification this is [`Self::estimate`].
+    pub fn estimate_among<'a>(
+        &mut self,
+        first: &BeaconObservation,
+        others: impl IntoIterator<Item = &'a BeaconObservation>,
+    ) -> PoseEstimate {
+        let mut others = others.into_iter().peekable();
+        if others.peek().is_none() {
+            return self.estimate(first);
+        }
+        let start = self.clone();
+        let cost = |e: &PoseEstimate| e.reprojection_rms_px.powi(2) * e.beacons_used as f64;
+        let first_estimate = self.estimate(first);
+        // The best valid one (its estimate and the solver state after it),
+        // and the cost of the runner-up.
+        let mut best: Option<(PoseEstimate, Option<PoseEstimator>)> =
+            first_estimate.valid.then_some((first_estimate, None));
+        let mut second = f64::INFINITY;
+        for obs in others {
+            let mut solver = start.clone();
+            let e = solver.estimate(obs);
+            if !e.valid {
+                continue;
+            }
+            match &best {
+                Some((b, _)) if cost(b) <= cost(&e) => second = second.min(cost(&e)),
+                Some((b, _)) => {
+                    second = second.min(cost(b));
+                    best = Some((e, Some(solver)));
+                }
+                None => best = Some((e, Some(solver))),
+            }
+        }
+        let Some((e, solver)) = best else {
+            return first_estimate;
+        };
+        let margin = self.cfg.ambiguity_chi2 * self.sigma_px * self.sigma_px;
+        if second - cost(&e) < margin {
+            *self = start;
+            return PoseEstimate::invalid(e.beacons_used, e.reprojection_rms_px, e.iterations);
+        }
+        if let Some(solver) = solver {
+            *self = solver;
+        }
+        e
+    }
+
     /// Estimates the parent's pose from one observation. Beacons are matched
     /// by index with the layout; non-finite pixels are ignored.
     pub fn estimate(&mut self, obs: &BeaconObservation) -> PoseEstimate {
