@@ -305,7 +305,20 @@ fn a_realtime_run_over_two_hosts_starts_every_host_at_one_epoch_and_the_agents_s
     // last snapshot puts each vehicle near its last recorded truth.
     let rec = Recording::open(&out.join("recording.mcap")).unwrap();
     let world = rec.samples::<ipc_types::World>("/world");
-    let last = world.last().expect("no world snapshot");
+    let Some(last) = world.last() else {
+        // What the run left, to tell a lost host part from a lost channel.
+        let counts: Vec<(String, usize)> = rec
+            .channels()
+            .iter()
+            .map(|c| (c.topic.clone(), rec.topic_messages(&c.topic).count()))
+            .collect();
+        panic!(
+            "no world snapshot; recording {counts:?}\nhosts.json {}\nsummary recording {} lost {}",
+            std::fs::read_to_string(out.join("hosts.json")).unwrap_or_default(),
+            s["recording"],
+            s["samples_lost"]
+        );
+    };
     let names: Vec<String> = shoal_scenario::Scenario::from_toml(&text)
         .unwrap()
         .vehicles

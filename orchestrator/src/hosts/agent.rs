@@ -112,10 +112,24 @@ fn serve_session(
             opts.listen.join(", ")
         );
     }
+    // When this session sent a finished run's files.
+    let mut sent_at: Option<Instant> = None;
     let served = loop {
         if launch::termination_requested().is_some() {
             tracing::info!("host agent stopping on a signal");
             break Served::Stop;
+        }
+        // Files sent but never released: the coordinator is gone; they
+        // stay on this host and the next coordinator gets a fresh session.
+        if sent_at.is_some_and(|t| t.elapsed() > RELEASE_WAIT) {
+            if let Some(f) = finished.take() {
+                tracing::warn!(
+                    run = %f.run_id,
+                    "the coordinator never confirmed the run's files; they stay in {}",
+                    f.out.display()
+                );
+            }
+            break Served::Collected;
         }
         let query = match queries.recv_timeout(Duration::from_millis(200)) {
             Ok(Some(q)) => q,
@@ -144,12 +158,25 @@ fn serve_session(
                 }
             }
         } else if let Some(run) = key.strip_prefix(&format!("shoal-host/{}/finish/", opts.name)) {
+            match finished.as_ref() {
+                Some(f) if f.run_id == run => {
+                    if let Err(e) = send_back(&query, f) {
+                        tracing::warn!("cannot send the run's files: {e:#}");
+                    }
+                    sent_at = Some(Instant::now());
+                }
+                _ => {
+                    let _ = query
+                        .reply_err(format!("host {} has no finished run {run}", opts.name))
+                        .wait();
+                }
+            }
+        } else if let Some(run) = key.strip_prefix(&format!("shoal-host/{}/release/", opts.name)) {
             match finished.take() {
                 Some(f) if f.run_id == run => {
-                    if let Err(e) = send_back(&query, &f) {
-                        tracing::warn!(%e, "cannot send the run's files");
-                    }
-                    drop(query);
+                    let _ = query
+                        .reply(query.key_expr().clone(), Vec::<u8>::new())
+                        .wait();
                     let _ = std::fs::remove_dir_all(&f.out);
                     break Served::Collected;
                 }
@@ -171,6 +198,9 @@ fn serve_session(
         .map_err(|e| anyhow::anyhow!("closing the Zenoh session: {e}"))?;
     Ok(served)
 }
+
+/// How long files sent stay waiting for the coordinator's release.
+const RELEASE_WAIT: Duration = Duration::from_secs(60);
 
 /// Replies to `finish`: the outcome, then every file in pieces.
 fn send_back(query: &zenoh::query::Query, f: &Finished) -> anyhow::Result<()> {

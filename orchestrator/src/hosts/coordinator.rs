@@ -227,10 +227,32 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
         None
     };
     let mut outcomes = Vec::new();
+    // A host that ran to the end but whose files did not all come back:
+    // the run fails (its recording would lack that host) once the rest is
+    // filed.
+    let mut uncollected: Vec<String> = Vec::new();
     for h in started.iter().copied().filter(|h| !gone.contains(h)) {
-        match collect(&session, &placement.hosts[h], &run_id, &opts.out) {
-            Ok(o) => outcomes.push(o),
-            Err(e) => tracing::warn!("cannot collect host {}: {e:#}", placement.hosts[h]),
+        let host = &placement.hosts[h];
+        let mut tries = 0;
+        let got = loop {
+            tries += 1;
+            match collect(&session, host, &run_id, &opts.out) {
+                Err(e) if tries < COLLECT_TRIES => {
+                    tracing::warn!("collecting host {host}: {e:#}; asking again")
+                }
+                got => break got,
+            }
+        };
+        match got {
+            Ok(o) => {
+                release(&session, host, &run_id);
+                outcomes.push(o);
+            }
+            Err(e) => {
+                let e = format!("cannot collect host {host}: {e:#}");
+                tracing::warn!("{e}");
+                uncollected.push(e);
+            }
         }
     }
     drop((fences, failures, lost));
@@ -322,6 +344,9 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
     );
     let wall_time_s = result?;
     joined?;
+    if let Some(e) = uncollected.first() {
+        anyhow::bail!("{e}");
+    }
     for o in &outcomes {
         if let Some(e) = &o.error {
             anyhow::bail!("host {} failed: {e}", o.host);
@@ -668,6 +693,22 @@ fn drive(
     Ok(start.elapsed().as_secs_f64())
 }
 
+/// Times a host is asked for its files before the run fails.
+const COLLECT_TRIES: usize = 3;
+
+/// Tells `host` that its files of run `run_id` are all here: it drops them
+/// and closes its session (not before, or replies on their way are lost).
+fn release(session: &zenoh::Session, host: &str, run_id: &str) {
+    let replies = session
+        .get(wire::release(host, run_id))
+        .timeout(Duration::from_secs(10))
+        .wait();
+    match replies.map(|r| r.recv()) {
+        Ok(Ok(r)) if r.result().is_ok() => {}
+        _ => tracing::warn!("host {host} did not confirm the release of its files"),
+    }
+}
+
 /// Takes host `host`'s outcome and files into `out`: its recording as
 /// `parts/<host>.mcap`, its logs into `logs/`.
 fn collect(
@@ -684,6 +725,8 @@ fn collect(
         .map_err(zerr("finish query"))?;
     let mut outcome: Option<HostOutcome> = None;
     let mut files: BTreeMap<String, std::fs::File> = BTreeMap::new();
+    // Per file sent: (bytes received, the whole file's size).
+    let mut received: BTreeMap<String, (u64, u64)> = BTreeMap::new();
     while let Ok(r) = replies.recv() {
         let s = match r.result() {
             Ok(s) => s,
@@ -705,6 +748,10 @@ fn collect(
             "host {host} sent a file outside the run: {}",
             chunk.path
         );
+        let got = received
+            .entry(chunk.path.clone())
+            .or_insert((0, chunk.total));
+        got.0 += bytes.len() as u64;
         let target = if chunk.path == "recording.mcap" {
             out.join("parts").join(format!("{host}.mcap"))
         } else if chunk.path.starts_with("logs/") && !chunk.path.ends_with(".toml") {
@@ -726,5 +773,17 @@ fn collect(
             f.write_all(&bytes)?;
         }
     }
-    outcome.with_context(|| format!("host {host} sent no outcome"))
+    let outcome = outcome.with_context(|| format!("host {host} sent no outcome"))?;
+    // Every file the host announced, whole: a piece lost on the way would
+    // otherwise leave a recording that silently lacks what it held.
+    for path in &outcome.files {
+        match received.get(path) {
+            Some(&(got, total)) if got == total => {}
+            Some(&(got, total)) => {
+                anyhow::bail!("host {host} sent {got} of the {total} bytes of {path}")
+            }
+            None => anyhow::bail!("host {host} announced {path} but never sent it"),
+        }
+    }
+    Ok(outcome)
 }

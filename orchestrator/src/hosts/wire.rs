@@ -58,6 +58,14 @@ pub fn finish(host: &str, run: &str) -> String {
     format!("shoal-host/{host}/finish/{run}")
 }
 
+/// The coordinator has all of run `run`'s files from `host`: the agent may
+/// drop them and close its session. Until then it keeps them and answers
+/// `finish` again (closing a Zenoh session cuts off the replies still on
+/// their way, and the coordinator's query then ends short).
+pub fn release(host: &str, run: &str) -> String {
+    format!("shoal-host/{host}/release/{run}")
+}
+
 /// An agent's monotonic clock, read by a query (see [`ClockOffset`]).
 pub fn time(host: &str) -> String {
     format!("shoal-host/{host}/time")
