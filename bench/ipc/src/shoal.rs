@@ -52,7 +52,7 @@ fn open<S: Sample + Payload>(cfg: &PeerConfig, ping: bool) -> Result<Ports<S>, B
     let vehicle = format!("bench-{}-{}", cfg.case.name(), cfg.size);
     let node = shoal_runtime::domain_node(&cfg.run_id, &format!("{vehicle}/{me}"))?;
     // A per-vehicle channel's limits; a camera frame's for the large sizes.
-    let limits = if in_place::<S>() {
+    let limits = if S::SIZE > 4096 {
         ChannelLimits::image()
     } else {
         ChannelLimits::vehicle()
@@ -104,10 +104,12 @@ fn context(tick: u64) -> StepContext {
     }
 }
 
-/// True for the sizes a service moves in place (camera frames); smaller
-/// samples go by value, copied once each way, as every service's do.
+/// True for the sizes a service moves in place: from 4 KiB (the world
+/// snapshot, 20 KB, and camera frames are the services' only samples that
+/// large); smaller ones go by value, copied once each way, as every
+/// per-vehicle sample (448 B at most) does.
 fn in_place<S: Payload>() -> bool {
-    S::SIZE > 4096
+    S::SIZE >= 4096
 }
 
 /// Publishes the message of `round` with `origin`.
