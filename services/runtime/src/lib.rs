@@ -14,7 +14,8 @@
 //! - **realtime**: the process wakes on its own interval on the wall clock;
 //!   a wake-up later than one period is a deadline miss.
 //!
-//! Processes never busy-poll: they block in an iceoryx2 [`WaitSet`].
+//! Processes never busy-poll: they block in ppoll(2) on their iceoryx2
+//! event listeners' sockets.
 //!
 //! ```no_run
 //! use shoal_runtime::{Runtime, RunArgs, Task, StepContext, TaskError};
@@ -42,6 +43,7 @@ use std::time::Duration;
 
 use iceoryx2::prelude::*;
 pub use iceoryx2::service::{ipc, local, Service};
+use iceoryx2_bb_posix::signal::SignalHandler;
 use ipc_types::{Clock, RunChannel};
 
 pub use domain::{
@@ -534,27 +536,22 @@ impl<S: Service> Runtime<S> {
         // a process due every k-th tick reads the latest tick only
         .latest_only();
         let done = self.done_notifier()?;
+        // The first read installs iceoryx2's SIGINT/SIGTERM handlers (no
+        // request can have been caught before them): from here on a
+        // termination request ends the loop and `finish` still runs.
+        let _ = SignalHandler::termination_requested();
         // Ready: every port of this process exists, so the first tick's samples reach it.
         self.notify_ready(&done)?;
 
-        let waitset = WaitSetBuilder::new()
-            .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
-            .create::<S>()
-            .map_err(|e| RuntimeError::Wait(Box::new(e)))?;
-        let guard = waitset
-            .attach_notification(&wake)
-            .map_err(|e| RuntimeError::Wait(Box::new(e)))?;
         let mut last_sim: Option<u64> = None;
         let mut failure: Option<RuntimeError> = None;
         let mut clock = clock;
         let mut latest_clock: Option<Clock> = None;
         let spin_ns = self.args.spin_us * 1_000;
-        let on_event = |id: WaitSetAttachmentId<S>| {
-            if !id.has_event_from(&guard) {
-                return CallbackProgression::Continue;
-            }
+        // Steps on the wake-up just polled; false once the run must end.
+        let mut on_wake = || -> bool {
             // Step on every wake-up; with a spin budget, poll for the next
-            // one before going back to block in the WaitSet.
+            // one before going back to block.
             let mut spin_until = 0u64;
             loop {
                 let mut woken = false;
@@ -564,18 +561,18 @@ impl<S: Service> Runtime<S> {
                         std::hint::spin_loop();
                         continue;
                     }
-                    return CallbackProgression::Continue;
+                    return true;
                 }
                 match clock.drain_latest() {
                     Ok(Some(c)) => latest_clock = Some(c),
                     Ok(None) => {}
                     Err(e) => {
                         failure = Some(e);
-                        return CallbackProgression::Stop;
+                        return false;
                     }
                 }
                 let Some(c) = latest_clock else {
-                    return CallbackProgression::Continue;
+                    return true;
                 };
                 let sim = c.header.sim_time_ns;
                 let wake_mono_ns = mono_ns();
@@ -594,7 +591,7 @@ impl<S: Service> Runtime<S> {
                         sim_time_s: ctx.sim_time_s(),
                         source,
                     });
-                    return CallbackProgression::Stop;
+                    return false;
                 }
                 report.steps += 1;
                 stats.after_step(&ctx, mono_ns().saturating_sub(wake_mono_ns), report);
@@ -603,24 +600,41 @@ impl<S: Service> Runtime<S> {
                         service: "done".into(),
                         source: Box::new(e),
                     });
-                    return CallbackProgression::Stop;
+                    return false;
                 }
                 if spin_ns == 0 {
                     // Blocking: the next wake-up comes after the orchestrator
-                    // has heard `done`, and the WaitSet (level-triggered)
-                    // sees it; polling for it here costs two system calls.
-                    return CallbackProgression::Continue;
+                    // has heard `done`, and the poll (level-triggered) sees
+                    // it; trying for it here would cost a system call.
+                    return true;
                 }
                 spin_until = mono_ns() + spin_ns;
             }
         };
-        let mut on_event = on_event;
-        // A signal that is not a termination request (SIGCONT after a
-        // stall, SIGCHLD, ...) interrupts the wait: wait again.
+        // ppoll(2) on the wake socket, not a WaitSet: one system call per
+        // wait, where the WaitSet's select made two (it checks each ready
+        // descriptor with fcntl). A signal that is not a termination request
+        // (SIGCONT after a stall, SIGCHLD, ...) interrupts it: wait again.
+        let mut fds = [libc::pollfd {
+            fd: listener_fd(&wake),
+            events: libc::POLLIN,
+            revents: 0,
+        }];
+        // The termination flag is read before each wait (a lock and an
+        // atomic, no system call); a request that comes just after it is
+        // seen at the next wake-up or within the poll's second.
         let result = loop {
-            match waitset.wait_and_process(&mut on_event) {
-                Ok(iceoryx2::waitset::WaitSetRunResult::Interrupt) => continue,
-                other => break other,
+            if SignalHandler::termination_requested() {
+                break Ok(());
+            }
+            match poll_until(&mut fds, 1_000_000_000) {
+                Ok(true) => {
+                    if !on_wake() {
+                        break Ok(());
+                    }
+                }
+                Ok(false) => {}
+                Err(e) => break Err(e),
             }
         };
         let finish = task.finish();
