@@ -535,11 +535,9 @@ impl Identifier {
         let radius = if rigid {
             0.0
         } else {
-            let n = ks.len() as f64;
-            let c = ks.iter().fold([0.0, 0.0], |a, &k| {
-                [a[0] + pred[k][0] / n, a[1] + pred[k][1] / n]
-            });
-            ks.iter().map(|&k| dist(pred[k], c)).fold(0.0, f64::max)
+            let shown: Vec<[f64; 2]> = ks.iter().map(|&k| pred[k]).collect();
+            let c = centroid(&shown);
+            shown.iter().map(|&p| dist(p, c)).fold(0.0, f64::max)
         };
         let mut options: [Vec<u8>; MAX_BEACONS] = Default::default();
         for &k in &ks {
@@ -563,9 +561,11 @@ impl Identifier {
             ks: &ks,
             options: &options,
             min: self.min_beacons,
-            max_scale: self.cfg.max_scale_ratio,
-            max_roll: self.cfg.max_roll_deg.to_radians(),
-            max_shift: gate,
+            bounds: MapBounds {
+                max_scale: self.cfg.max_scale_ratio,
+                max_roll: self.cfg.max_roll_deg.to_radians(),
+                max_shift: gate,
+            },
             rigid,
             assign: [u8::MAX; MAX_BEACONS],
             best: Vec::new(),
@@ -634,12 +634,8 @@ struct Search<'a> {
     ks: &'a [usize],
     options: &'a [Vec<u8>; MAX_BEACONS],
     min: usize,
-    max_scale: f64,
-    /// Largest rotation of the fitted map, rad.
-    max_roll: f64,
-    /// Largest shift of the matched beacons' centroid from its
-    /// prediction, px.
-    max_shift: f64,
+    /// What the fitted map may do.
+    bounds: MapBounds,
     /// Fit a similarity (shift, scale, roll: the prediction is recent and
     /// good) rather than an affine map (an old or nominal prediction).
     rigid: bool,
@@ -693,22 +689,10 @@ impl Search<'_> {
                 n += 1;
             }
         }
-        let bounds = MapBounds {
-            max_scale: self.max_scale,
-            max_roll: self.max_roll,
-        };
-        let centroid = |x: &[[f64; 2]]| {
-            x.iter().fold([0.0, 0.0], |a, v| {
-                [a[0] + v[0] / n as f64, a[1] + v[1] / n as f64]
-            })
-        };
-        if n == 0 || dist(centroid(&p[..n]), centroid(&q[..n])) > self.max_shift {
-            return None;
-        }
         if self.rigid {
-            similarity_residual(&p[..n], &q[..n], &bounds)
+            similarity_residual(&p[..n], &q[..n], &self.bounds)
         } else {
-            affine_residual(&p[..n], &q[..n], &bounds)
+            affine_residual(&p[..n], &q[..n], &self.bounds)
         }
     }
 }
@@ -719,22 +703,32 @@ struct MapBounds {
     max_scale: f64,
     /// Largest rotation, rad.
     max_roll: f64,
+    /// Largest shift of the matched beacons' centroid from its
+    /// prediction, px.
+    max_shift: f64,
+}
+
+/// The centroid of `x` (not empty).
+fn centroid(x: &[[f64; 2]]) -> [f64; 2] {
+    let n = x.len() as f64;
+    let s = x.iter().fold([0.0, 0.0], |a, v| [a[0] + v[0], a[1] + v[1]]);
+    [s[0] / n, s[1] / n]
 }
 
 /// RMS residual of the least-squares similarity (shift, scale, rotation)
-/// taking `p` onto `q`, px; `None` if it is degenerate, scales by more
-/// than `max_scale` either way or turns by more than `max_roll`.
+/// taking `p` onto `q`, px; `None` if it is degenerate, shifts by more
+/// than `max_shift`, scales by more than `max_scale` either way or turns by
+/// more than `max_roll`.
 fn similarity_residual(p: &[[f64; 2]], q: &[[f64; 2]], bounds: &MapBounds) -> Option<f64> {
     let max_scale = bounds.max_scale;
     let n = p.len();
     if n < 2 {
         return None;
     }
-    let mean = |x: &[[f64; 2]]| {
-        let s = x.iter().fold([0.0, 0.0], |a, v| [a[0] + v[0], a[1] + v[1]]);
-        [s[0] / n as f64, s[1] / n as f64]
-    };
-    let (mp, mq) = (mean(p), mean(q));
+    let (mp, mq) = (centroid(p), centroid(q));
+    if dist(mp, mq) > bounds.max_shift {
+        return None;
+    }
     let (mut spp, mut a, mut b) = (0.0, 0.0, 0.0);
     for i in 0..n {
         let (x, y) = (p[i][0] - mp[0], p[i][1] - mp[1]);
@@ -762,7 +756,8 @@ fn similarity_residual(p: &[[f64; 2]], q: &[[f64; 2]], bounds: &MapBounds) -> Op
 }
 
 /// RMS residual of the least-squares affine map taking `p` onto `q`, px;
-/// `None` if it is degenerate, mirrors, scales area by more than
+/// `None` if it is degenerate, shifts by more than `max_shift`, mirrors,
+/// scales area by more than
 /// `max_scale²` either way, or turns by more than `max_roll` (the angle of
 /// the rotation in its polar decomposition).
 fn affine_residual(p: &[[f64; 2]], q: &[[f64; 2]], bounds: &MapBounds) -> Option<f64> {
@@ -771,11 +766,10 @@ fn affine_residual(p: &[[f64; 2]], q: &[[f64; 2]], bounds: &MapBounds) -> Option
     if n < 3 {
         return None;
     }
-    let mean = |x: &[[f64; 2]]| {
-        let s = x.iter().fold([0.0, 0.0], |a, v| [a[0] + v[0], a[1] + v[1]]);
-        [s[0] / n as f64, s[1] / n as f64]
-    };
-    let (mp, mq) = (mean(p), mean(q));
+    let (mp, mq) = (centroid(p), centroid(q));
+    if dist(mp, mq) > bounds.max_shift {
+        return None;
+    }
     // Centred: q − mq = A (p − mp); normal equations A = (Σ q pᵀ)(Σ p pᵀ)⁻¹.
     let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
     let (mut ux, mut uy, mut vx, mut vy) = (0.0, 0.0, 0.0, 0.0);
