@@ -29,6 +29,8 @@ pub enum Compression {
 pub struct WriterOptions {
     /// Chunk compression (default zstd).
     pub compression: Compression,
+    /// The zstd level (default 1, the fastest; 0 is zstd's own default, 3).
+    pub zstd_level: u32,
     /// Target chunk size, bytes (default 1 MiB).
     pub chunk_bytes: u64,
     /// The keep-last depth each channel's `offered_qos_profiles` states
@@ -40,6 +42,7 @@ impl Default for WriterOptions {
     fn default() -> Self {
         Self {
             compression: Compression::Zstd,
+            zstd_level: 1,
             chunk_bytes: 1 << 20,
             qos_depth: 1,
         }
@@ -90,13 +93,14 @@ impl RecordingWriter {
             path: path.to_path_buf(),
             source,
         })?;
-        let compression = match opts.compression {
-            Compression::Zstd => Some(mcap::Compression::Zstd),
-            Compression::Lz4 => Some(mcap::Compression::Lz4),
-            Compression::None => None,
+        let (compression, level) = match opts.compression {
+            Compression::Zstd => (Some(mcap::Compression::Zstd), opts.zstd_level),
+            Compression::Lz4 => (Some(mcap::Compression::Lz4), 0),
+            Compression::None => (None, 0),
         };
         let writer = mcap::WriteOptions::new()
             .compression(compression)
+            .compression_level(level)
             .compression_threads(0)
             .chunk_size(Some(opts.chunk_bytes))
             .profile("ros2")

@@ -60,9 +60,10 @@ pub struct IpcCmd {
     /// Untimed round trips before the timed ones, in every pass.
     #[arg(long, default_value_t = 1_000)]
     pub warmup: u64,
-    /// Sample sizes in bytes, comma-separated: 256, 4096 (sent by value, as
-    /// a service's samples are), 262144 and 1048576 (a camera frame's sizes,
-    /// written and read in place).
+    /// Sample sizes in bytes, comma-separated: 256 (sent by value, as a
+    /// service's small samples are), 4096 (written and read in place, as the
+    /// services move every sample that large), 262144 and 1048576 (a camera
+    /// frame's sizes, in place).
     #[arg(long, value_delimiter = ',', default_values_t = shoal_bench_ipc::SIZES)]
     pub sizes: Vec<usize>,
     /// Cases to run, comma-separated (default: all). iox2-poll / iox2-event /
@@ -755,7 +756,7 @@ fn print_costs(costs: &[Value]) {
     }
     println!(
         "{:>6}  {:>22} {:>12} {:>8} {:>7} {:>7}   (ns per call)",
-        "size", "is_finite (schema walk)", "per type", "mono_ns", "record", "copy"
+        "size", "is_finite (generated)", "plain loop", "mono_ns", "record", "copy"
     );
     for c in costs {
         println!(
@@ -771,7 +772,7 @@ fn print_costs(costs: &[Value]) {
     for c in costs {
         let added = f(c, "hop_shoal_ns") - f(c, "hop_raw_shoal_limits_ns");
         println!(
-            "{:>6}  shoal adds {added:.0} ns per hop; Sample::is_finite walking the schema on publish and on take is {:.0} ns of it",
+            "{:>6}  shoal adds {added:.0} ns per hop; Sample::is_finite on publish and on take is {:.0} ns of it",
             size(c),
             2.0 * f(c, "is_finite_ns"),
         );

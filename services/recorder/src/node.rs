@@ -193,6 +193,7 @@ impl RecorderTask {
                 shoal_scenario::Compression::Lz4 => Compression::Lz4,
                 shoal_scenario::Compression::None => Compression::None,
             },
+            zstd_level: scenario.recording.zstd_level,
             chunk_bytes: scenario.recording.chunk_kib * 1024,
             ..WriterOptions::default()
         };
