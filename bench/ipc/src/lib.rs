@@ -180,8 +180,8 @@ pub struct PeerConfig {
     /// Untimed round trips before the timed ones (their payloads are checked too).
     #[arg(long, default_value_t = 1_000)]
     pub warmup: u64,
-    /// The iceoryx2 domain (`shoal_<run-id>_` in /dev/shm, /tmp/shoal/<run-id>/);
-    /// the Unix socket lives in that directory too. At most 26 bytes.
+    /// The iceoryx2 domain (`shoal_<run-id>_` in /dev/shm, /dev/shm/shoal/<run-id>/);
+    /// the Unix socket lives in that directory too. At most 23 bytes.
     #[arg(long)]
     pub run_id: String,
     /// Pin this process to one CPU.
@@ -326,9 +326,9 @@ pub(crate) fn cause<E: std::error::Error + Send + Sync + 'static>(e: E) -> Cause
 }
 
 /// Longest run id whose iceoryx2 event sockets
-/// (`/tmp/shoal/<id>/shoal_<id>_<30-digit hash>.event`) still fit the
-/// 107 bytes of a Unix socket path.
-pub const MAX_RUN_ID_LEN: usize = 26;
+/// (`/dev/shm/shoal/<id>/shoal_<id>_<hash of up to 31 digits>.event`) still
+/// fit the 107 bytes of a Unix socket path.
+pub const MAX_RUN_ID_LEN: usize = 23;
 
 /// Runs one peer as `cfg` says (pins it to `cfg.cpu` first).
 pub fn run_peer(cfg: &PeerConfig) -> Result<PeerOutput, BenchError> {

@@ -77,7 +77,7 @@ fn every_case_echoes_every_round_trip_intact_between_two_processes() {
     for (ci, case) in Case::ALL.into_iter().enumerate() {
         for size in SIZES {
             // Short: iceoryx2's event sockets live under the domain's directory
-            // (`/tmp/shoal/<id>/shoal_<id>_<hash>.event`) and a Unix socket path
+            // (`/dev/shm/shoal/<id>/shoal_<id>_<hash>.event`) and a Unix socket path
             // holds at most 107 bytes.
             let run_id = format!("bt{}-{ci}-{size}", std::process::id());
             let _domain = Domain(run_id.clone());

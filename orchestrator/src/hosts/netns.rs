@@ -328,18 +328,15 @@ impl TestNet {
             .collect()
     }
 
-    /// Files in host `h`'s own `/dev/shm` and below its `/tmp/shoal` (the
-    /// iceoryx2 domains), read through its agent's root.
+    /// Files in host `h`'s own `/dev/shm` (the iceoryx2 domains: shared
+    /// memory, and below `/dev/shm/shoal` their roots), read through its
+    /// agent's root.
     pub fn shm_files(&self, h: usize) -> anyhow::Result<Vec<PathBuf>> {
         let pid = self
             .agent_pid(h)
             .with_context(|| format!("host {} has no agent", self.hosts[h].name))?;
         let root = PathBuf::from(format!("/proc/{pid}/root"));
-        let mut out = Vec::new();
-        for dir in ["dev/shm", "tmp/shoal"] {
-            out.extend(super::files_under(&root.join(dir)));
-        }
-        Ok(out)
+        Ok(super::files_under(&root.join("dev/shm")))
     }
 
     /// Takes host `h`'s link down (`up = false`) or back up.

@@ -9,10 +9,11 @@ use crate::launch::os;
 /// What a run of a scenario needs from the machine, estimated from its
 /// topology before anything starts (`shoal check` prints it).
 ///
-/// The shared-memory and file-descriptor models were fitted to a measured
-/// run of the paper scenario (iceoryx2 0.10, 5 vehicles, 26 processes: 72
-/// services, 258 files in `/dev/shm` holding 4.0 MB, at most 307 open files
-/// in one process, the recorder) and err on the high side.
+/// The shared-memory and file-descriptor models were fitted to measured
+/// runs of the paper scenario (iceoryx2 0.10, 5 vehicles, 26 processes: 72
+/// services, 4.0 MB of shared memory, at most 307 open files in one
+/// process, the recorder; 314 shared-memory files and 771 entries below the
+/// domain's root, both in `/dev/shm`) and err on the high side.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub struct Needs {
     /// Processes: the service processes plus the orchestrator.
@@ -23,7 +24,9 @@ pub struct Needs {
     /// Bytes of `/dev/shm`: each publisher's data segment (sample size ×
     /// slots), each service's dynamic segment, each connection.
     pub shm_bytes: u64,
-    /// Files in `/dev/shm`.
+    /// Files in `/dev/shm`: shared-memory segments, and the node, port and
+    /// service files and directories of the domain's root below
+    /// `/dev/shm/shoal`.
     pub shm_files: u64,
     /// Most file descriptors one process holds (the recorder, which opens
     /// every channel, or the orchestrator, which opens every wake event).
@@ -101,11 +104,18 @@ pub fn needs(s: &Scenario) -> Needs {
     // of each vehicle (world ← truth; planner and mpc ← nav; plant ← thrust;
     // planner ← sonar, leader_pose; mpc ← setpoint) about seven more; every
     // camera, sonar and the recorder read the world; every process the clock.
+    // (12 per vehicle: 140 connection segments measured in the paper run.)
     let sensors = (vehicles + followers) as u64;
-    let connections = vehicle_channels + 7 * vehicles as u64 + sensors + 1 + n_procs;
+    let connections = vehicle_channels + 12 * vehicles as u64 + sensors + 1 + n_procs;
     shm += connections * CONNECTION_BYTES;
     files += connections;
     let services = vehicle_channels + 3 + n_procs;
+    // The domain's root: a static file per service; per process a node
+    // directory, its details and monitoring entries and its wake socket;
+    // a service tag and a port tag per port (every publisher, subscriber,
+    // notifier and listener; 266 of each measured).
+    let ports = connections + vehicle_channels + 4 * n_procs + 4;
+    files += 4 + services + 10 * n_procs + 2 * ports;
     let recorder_services = vehicle_channels + 4;
     let orchestrator_services = n_procs + 2;
     let world_services = vehicles as u64 + 4;
@@ -249,10 +259,11 @@ mod tests {
     use super::*;
 
     /// Measured on a live run of the paper scenario (iceoryx2 0.10, this
-    /// repository's limits): 72 services in the domain, 258 files in
-    /// /dev/shm holding 4 014 828 bytes, 307 open files in the recorder.
+    /// repository's limits): 72 services in the domain, 4 014 828 bytes of
+    /// shared memory, 307 open files in the recorder; 314 shared-memory
+    /// files and 771 entries below the domain's root in /dev/shm.
     const PAPER_SERVICES: u64 = 72;
-    const PAPER_SHM_FILES: u64 = 258;
+    const PAPER_SHM_FILES: u64 = 314 + 771;
     const PAPER_SHM_BYTES: u64 = 4_014_828;
     const PAPER_RECORDER_FILES: u64 = 307;
 
