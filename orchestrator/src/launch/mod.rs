@@ -6,7 +6,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use ipc_types::{Clock, EventKind, Header, RunChannel};
@@ -101,16 +100,18 @@ pub enum RunError {
     Interrupted(&'static str),
 }
 
-/// The orchestrator's ports of a run: the clock, every process's wake
-/// event, `done`, the `events` channel; and what it does when a process dies.
+/// The orchestrator's ports of a run: the clock, the lockstep doorbell,
+/// `done`, the `events` channel; and what it does when a process dies.
 pub(crate) struct Ports {
     pub(crate) node: Node<ipc::Service>,
     pub(crate) clock: Publisher<Clock>,
     pub(crate) done: Listener<ipc::Service>,
     /// The socket `done` wakes up on.
     done_fd: i32,
-    /// Wake events by process index; `None` for a process another host runs.
-    pub(crate) wakes: Vec<Option<Notifier<ipc::Service>>>,
+    /// The lockstep doorbell: how the processes of a tick are woken.
+    bell: shoal_runtime::Doorbell,
+    /// By process index: true for a process this host runs (it rings only those).
+    local: Vec<bool>,
     /// Sequence number of the next clock sample.
     clock_seq: u64,
     /// The run's events.
@@ -143,25 +144,17 @@ impl Ports {
             .create()
             .context("done listener")?;
         let done_fd = shoal_runtime::listener_fd(&done);
-        let mut wakes = Vec::with_capacity(procs.len());
-        for p in procs {
-            if !local(p) {
-                wakes.push(None);
-                continue;
-            }
-            let n = shoal_runtime::open_wake(&node, run_id, &p.vehicle, p.kind.name())?
-                .notifier_builder()
-                .create()
-                .with_context(|| format!("wake notifier of {}", p.label()))?;
-            wakes.push(Some(n));
-        }
+        let bell =
+            shoal_runtime::Doorbell::create(run_id, procs.len()).context("lockstep doorbell")?;
+        let local = procs.iter().map(local).collect();
         let journal = Journal::open(&node, run_id)?;
         Ok(Self {
             node,
             clock,
             done_fd,
             done,
-            wakes,
+            bell,
+            local,
             clock_seq: 0,
             journal,
             recovery: Recovery::abort(procs.len()),
@@ -201,12 +194,10 @@ impl Ports {
 
     /// Wakes process `i` (a process of this host).
     pub(crate) fn wake(&self, i: usize, procs: &[ProcessSpec]) -> anyhow::Result<()> {
-        self.wakes
-            .get(i)
-            .and_then(Option::as_ref)
-            .with_context(|| format!("{} does not run on this host", procs[i].label()))?
-            .notify()
-            .with_context(|| format!("wake {}", procs[i].label()))?;
+        if !self.local.get(i).copied().unwrap_or(false) {
+            anyhow::bail!("{} does not run on this host", procs[i].label());
+        }
+        self.bell.ring(i);
         Ok(())
     }
 }

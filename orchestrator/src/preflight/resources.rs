@@ -10,16 +10,16 @@ use crate::launch::os;
 /// topology before anything starts (`shoal check` prints it).
 ///
 /// The shared-memory and file-descriptor models were fitted to measured
-/// runs of the paper scenario (iceoryx2 0.10, 5 vehicles, 26 processes: 72
-/// services, 4.0 MB of shared memory, at most 307 open files in one
-/// process, the recorder; 314 shared-memory files and 771 entries below the
+/// runs of the paper scenario (iceoryx2 0.10, 5 vehicles, 26 processes: 48
+/// services, 4.0 MB of shared memory, at most 317 open files in one
+/// process, the recorder; 263 shared-memory files and 615 entries below the
 /// domain's root, both in `/dev/shm`) and err on the high side.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub struct Needs {
     /// Processes: the service processes plus the orchestrator.
     pub processes: u64,
-    /// iceoryx2 services: every vehicle channel, world, clock, done, and one
-    /// wake event per process.
+    /// iceoryx2 services: every vehicle channel, world, clock, done, events
+    /// and stats.
     pub services: u64,
     /// Bytes of `/dev/shm`: each publisher's data segment (sample size ×
     /// slots), each service's dynamic segment, each connection.
@@ -29,7 +29,7 @@ pub struct Needs {
     /// `/dev/shm/shoal`.
     pub shm_files: u64,
     /// Most file descriptors one process holds (the recorder, which opens
-    /// every channel, or the orchestrator, which opens every wake event).
+    /// every channel).
     pub open_files: u64,
 }
 
@@ -70,13 +70,6 @@ pub fn needs(s: &Scenario) -> Needs {
     let wlim = ChannelLimits::world(vehicles);
     let clim = ChannelLimits::clock(procs.len());
     let dlim = ChannelLimits::done(procs.len());
-    let wake = ChannelLimits {
-        max_publishers: 2,
-        max_subscribers: 2,
-        max_nodes: 4,
-        max_buffer: 1,
-        history: 0,
-    };
     let mut shm: u64 = 0;
     let mut files: u64 = 1; // the domain's global management segment
     let mut vehicle_channels: u64 = 0;
@@ -97,27 +90,28 @@ pub fn needs(s: &Scenario) -> Needs {
         + dynamic_segment_bytes(&clim);
     shm += dynamic_segment_bytes(&dlim) + 1024;
     files += 2 + 2 + 2;
-    // one wake event per process: dynamic + event management segments.
-    shm += n_procs * (dynamic_segment_bytes(&wake) + 1024);
-    files += 2 * n_procs;
+    // events (one publisher) and stats (one publisher per process): a data
+    // segment each, a dynamic segment per service; the lockstep doorbell.
+    files += 1 + n_procs + 2 + 1;
     // Connections: the recorder reads every vehicle channel; the consumers
     // of each vehicle (world ← truth; planner and mpc ← nav; plant ← thrust;
     // planner ← sonar, leader_pose; mpc ← setpoint) about seven more; every
     // camera, sonar and the recorder read the world; every process the clock.
-    // (12 per vehicle: 140 connection segments measured in the paper run.)
+    // (12 per vehicle and 2 for the run: 140 connection segments measured
+    // in the paper run.)
     let sensors = (vehicles + followers) as u64;
-    let connections = vehicle_channels + 12 * vehicles as u64 + sensors + 1 + n_procs;
+    let connections = vehicle_channels + 12 * vehicles as u64 + sensors + 2 + n_procs;
     shm += connections * CONNECTION_BYTES;
     files += connections;
-    let services = vehicle_channels + 3 + n_procs;
+    let services = vehicle_channels + 5;
     // The domain's root: a static file per service; per process a node
-    // directory, its details and monitoring entries and its wake socket;
-    // a service tag and a port tag per port (every publisher, subscriber,
-    // notifier and listener; 266 of each measured).
-    let ports = connections + vehicle_channels + 4 * n_procs + 4;
-    files += 4 + services + 10 * n_procs + 2 * ports;
+    // directory with its details and monitoring entries; the socket of
+    // `done`; a service tag and a port tag per port (every publisher,
+    // subscriber, notifier and listener; 214 of each measured).
+    let ports = connections + vehicle_channels + 2 * n_procs + 4;
+    files += 4 + services + 1 + 5 * (n_procs + 1) + 2 * ports;
     let recorder_services = vehicle_channels + 4;
-    let orchestrator_services = n_procs + 2;
+    let orchestrator_services = 4;
     let world_services = vehicles as u64 + 4;
     let busiest = recorder_services
         .max(orchestrator_services)
@@ -259,13 +253,13 @@ mod tests {
     use super::*;
 
     /// Measured on a live run of the paper scenario (iceoryx2 0.10, this
-    /// repository's limits): 72 services in the domain, 4 014 828 bytes of
-    /// shared memory, 307 open files in the recorder; 314 shared-memory
-    /// files and 771 entries below the domain's root in /dev/shm.
-    const PAPER_SERVICES: u64 = 72;
-    const PAPER_SHM_FILES: u64 = 314 + 771;
+    /// repository's limits): 48 services in the domain, 4 014 828 bytes of
+    /// shared memory, 317 open files in the recorder; 263 shared-memory
+    /// files and 615 entries below the domain's root in /dev/shm.
+    const PAPER_SERVICES: u64 = 48;
+    const PAPER_SHM_FILES: u64 = 263 + 615;
     const PAPER_SHM_BYTES: u64 = 4_014_828;
-    const PAPER_RECORDER_FILES: u64 = 307;
+    const PAPER_RECORDER_FILES: u64 = 317;
 
     #[test]
     fn paper_needs_match_a_measured_run_and_err_high() {

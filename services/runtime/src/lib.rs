@@ -7,15 +7,17 @@
 //! [`Runtime`], then [`Runtime::run`] calls [`Task::step`] once per wake-up:
 //!
 //! - **lockstep**: the orchestrator publishes the [`Clock`](ipc_types::Clock)
-//!   and notifies the process's wake event on the ticks where it is due; the
+//!   and rings the process's counter of the run's [`Doorbell`] (a futex in
+//!   shared memory) on the ticks where it is due; the
 //!   process steps on the samples stamped *before* this tick (later ones are
 //!   held back for the next step, so the result does not depend on who ran
 //!   first), then notifies `done` with its own event id.
 //! - **realtime**: the process wakes on its own interval on the wall clock;
 //!   a wake-up later than one period is a deadline miss.
 //!
-//! Processes never busy-poll: they block in ppoll(2) on their iceoryx2
-//! event listeners' sockets.
+//! Processes never busy-poll: in lockstep they block in futex(2) on their
+//! doorbell counter, otherwise in ppoll(2) on their iceoryx2 event
+//! listeners' sockets.
 //!
 //! ```no_run
 //! use shoal_runtime::{Runtime, RunArgs, Task, StepContext, TaskError};
@@ -34,6 +36,7 @@
 
 pub mod convert;
 pub mod domain;
+pub mod doorbell;
 pub mod latency;
 pub mod ports;
 pub mod stats;
@@ -50,6 +53,7 @@ pub use domain::{
     alive_nodes, cleanup_domain, iceoryx_config, list_domain_files, release_domain, stale_domains,
     sweep_stale_domains, ChannelLimits, Release, EVENTS_HISTORY,
 };
+pub use doorbell::Doorbell;
 pub use latency::LatencyRecorder;
 pub use ports::{Publisher, Subscriber};
 pub use world::WorldView;
@@ -97,7 +101,7 @@ pub struct RunArgs {
     /// Vehicle this process belongs to (`run` for run-level processes).
     #[arg(long)]
     pub vehicle: String,
-    /// Process kind (sim-plant, camera-pose, ...); names the wake event.
+    /// Process kind (sim-plant, camera-pose, ...).
     #[arg(long)]
     pub process: String,
     /// This process's index in the run (its `done` event id).
@@ -509,21 +513,16 @@ impl<S: Service> Runtime<S> {
     where
         iceoryx2::port::listener::Listener<S>: SynchronousMultiplexing,
     {
-        let wake_name =
-            ipc_types::wake_service_name(&self.args.run_id, &self.args.vehicle, &self.args.process);
-        let wake_service = open_wake(
-            &self.node,
-            &self.args.run_id,
-            &self.args.vehicle,
-            &self.args.process,
-        )?;
-        let wake = wake_service
-            .listener_builder()
-            .create()
-            .map_err(|e| RuntimeError::Port {
-                service: wake_name.clone(),
+        let me = self.args.index;
+        let bell = Doorbell::open(&self.args.run_id, self.args.processes).map_err(|e| {
+            RuntimeError::Port {
+                service: doorbell::doorbell_name(&self.args.run_id),
                 source: Box::new(e),
-            })?;
+            }
+        })?;
+        // Read before "ready": a ring older than that is not a wake-up for
+        // this process (it steps when the orchestrator rings it anew).
+        let mut seen = bell.seq(me);
         let clock_name = ipc_types::run_service_name(&self.args.run_id, RunChannel::Clock);
         let clock_limits = ChannelLimits::clock(self.args.processes);
         let clock: Subscriber<Clock, S> = Subscriber::open(
@@ -549,20 +548,26 @@ impl<S: Service> Runtime<S> {
         let mut latest_clock: Option<Clock> = None;
         let spin_ns = self.args.spin_us * 1_000;
         // Steps on the wake-up just polled; false once the run must end.
-        let mut on_wake = || -> bool {
+        // Steps on a wake-up (the doorbell counter now `now`, last stepped
+        // on `seen`).
+        let mut on_wake = |now: u32, seen: &mut u32| -> bool {
             // Step on every wake-up; with a spin budget, poll for the next
             // one before going back to block.
             let mut spin_until = 0u64;
+            let mut now = Some(now);
             loop {
-                let mut woken = false;
-                let _ = wake.try_wait(|_| woken = true);
-                if !woken {
+                let Some(n) = now.take() else {
                     if mono_ns() < spin_until {
                         std::hint::spin_loop();
+                        let n = bell.seq(me);
+                        if n != *seen {
+                            now = Some(n);
+                        }
                         continue;
                     }
                     return true;
-                }
+                };
+                *seen = n;
                 match clock.drain_latest() {
                     Ok(Some(c)) => latest_clock = Some(c),
                     Ok(None) => {}
@@ -604,44 +609,31 @@ impl<S: Service> Runtime<S> {
                 }
                 if spin_ns == 0 {
                     // Blocking: the next wake-up comes after the orchestrator
-                    // has heard `done`, and the poll (level-triggered) sees
-                    // it; trying for it here would cost a system call.
+                    // has heard `done`; the futex wait sees it.
                     return true;
                 }
                 spin_until = mono_ns() + spin_ns;
             }
         };
-        // ppoll(2) on the wake socket, not a WaitSet: one system call per
-        // wait, where the WaitSet's select made two (it checks each ready
-        // descriptor with fcntl). A signal that is not a termination request
-        // (SIGCONT after a stall, SIGCHLD, ...) interrupts it: wait again.
-        let mut fds = [libc::pollfd {
-            fd: listener_fd(&wake),
-            events: libc::POLLIN,
-            revents: 0,
-        }];
         // The termination flag is read before each wait (a lock and an
-        // atomic, no system call); a request that comes just after it is
-        // seen at the next wake-up or within the poll's second.
-        let result = loop {
+        // atomic, no system call); a request that comes just after it
+        // interrupts the futex wait, or is seen within its second. Another
+        // signal (SIGCONT after a stall, SIGCHLD, ...) just waits again.
+        loop {
             if SignalHandler::termination_requested() {
-                break Ok(());
+                break;
             }
-            match poll_until(&mut fds, 1_000_000_000) {
-                Ok(true) => {
-                    if !on_wake() {
-                        break Ok(());
-                    }
-                }
-                Ok(false) => {}
-                Err(e) => break Err(e),
+            let Some(now) = bell.wait(me, seen, Duration::from_secs(1)) else {
+                continue;
+            };
+            if !on_wake(now, &mut seen) {
+                break;
             }
-        };
+        }
         let finish = task.finish();
         if let Some(e) = failure {
             return Err(e);
         }
-        result.map_err(|e| RuntimeError::Wait(Box::new(e)))?;
         finish.map_err(|source| RuntimeError::Task {
             sim_time_s: last_sim.unwrap_or(0) as f64 * 1e-9,
             source,
