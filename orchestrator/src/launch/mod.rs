@@ -186,6 +186,7 @@ impl Ports {
         };
         self.clock_seq += 1;
         self.clock.publish_stamped(clock)?;
+        self.bell.arm(due.len());
         for &i in due {
             self.wake(i, procs)?;
         }
@@ -628,15 +629,33 @@ struct Tally {
 }
 
 impl Tally {
-    /// Done ids are process indices; ready ids follow them.
+    /// Done ids are process indices (the last of a tick to finish; the
+    /// others are read from the doorbell); ready ids follow them.
     fn on(&mut self, id: usize) {
         if id < self.n {
-            if self.pending[id] {
-                self.pending[id] = false;
-                self.remaining -= 1;
-            }
+            self.settle(id);
         } else if id < 2 * self.n {
             self.ready.push(id - self.n);
+        }
+    }
+
+    /// Process `i` has finished its step.
+    fn settle(&mut self, i: usize) {
+        if self.pending[i] {
+            self.pending[i] = false;
+            self.remaining -= 1;
+        }
+    }
+
+    /// Settles every pending process whose doorbell slot says it finished.
+    fn read(&mut self, bell: &shoal_runtime::Doorbell) {
+        if self.remaining == 0 {
+            return;
+        }
+        for i in 0..self.n {
+            if self.pending[i] && bell.is_done(i) {
+                self.settle(i);
+            }
         }
     }
 }
@@ -732,11 +751,17 @@ pub(crate) fn wait_done(
             t.remaining += 1;
         }
     }
+    // Read once per tick here: a tick's end wakes this wait only once, when
+    // every process has finished, and the loop below may end before its own
+    // reading of the flag.
+    if let Some(sig) = termination_requested() {
+        return Err(RunError::Interrupted(sig).into());
+    }
     let mut start = Instant::now();
     let slice = Duration::from_millis(50);
     // Adaptive wait: poll first, for at most the spin budget.
     while t.remaining > 0 && start.elapsed() < spin {
-        let _ = ports.done.try_wait(|ev| t.on(ev.id.as_value()));
+        t.read(&ports.bell);
         std::hint::spin_loop();
     }
     loop {
@@ -763,6 +788,7 @@ pub(crate) fn wait_done(
             .done
             .try_wait(|ev| t.on(ev.id.as_value()))
             .context("taking done")?;
+        t.read(&ports.bell);
         if t.remaining == 0 && t.ready.is_empty() && !ports.recovery.any_awaiting() {
             break;
         }

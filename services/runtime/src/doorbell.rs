@@ -3,11 +3,18 @@
 //!
 //! One shared-memory segment per run, `/dev/shm/shoal_<run-id>_doorbell`
 //! (the domain's prefix, so the run's cleanup and the stale-domain sweep
-//! remove it with the rest), holds one 32-bit counter per process, each on
-//! a cache line of its own. The orchestrator wakes process `i` by
-//! incrementing counter `i` and calling `FUTEX_WAKE` on it; the process
-//! sleeps in `FUTEX_WAIT` until the counter differs from the value it last
-//! stepped on. Samples, `done` and every other event stay on iceoryx2.
+//! remove it with the rest), holds one slot per process, each on a cache
+//! line of its own: the counter of its wake-ups and the last one it
+//! finished. The orchestrator wakes process `i` by incrementing counter `i`
+//! and calling `FUTEX_WAKE` on it; the process sleeps in `FUTEX_WAIT` until
+//! the counter differs from the value it last stepped on.
+//!
+//! A last slot counts the processes of the tick still stepping: the
+//! orchestrator sets it before it rings them, each process decrements it
+//! when it has finished, and only the one that brings it to zero notifies
+//! `done` (an iceoryx2 event, as every sample and every other event).
+//! Which processes have finished is read from their slots, so a count that
+//! a death left too high costs a wait's slice, never a wrong answer.
 //!
 //! It replaced an iceoryx2 event per process, whose Unix datagram socket
 //! cost the orchestrator a `sendto` and the process a `ppoll` and one or two
@@ -30,11 +37,14 @@ use iceoryx2_bb_posix::shared_memory::{SharedMemory, SharedMemoryBuilder};
 
 use crate::domain::domain_prefix;
 
-/// One process's counter, alone on its cache line (the orchestrator writes
+/// One process's slot, alone on its cache line (the orchestrator writes
 /// one while another process reads its own).
 #[repr(C, align(64))]
 struct Slot {
+    /// Wake-ups rung so far.
     seq: AtomicU32,
+    /// The wake-up whose step the process finished last.
+    done: AtomicU32,
 }
 
 /// Why the doorbell could not be made or opened.
@@ -96,7 +106,7 @@ impl Doorbell {
         let file = FileName::new(name.as_bytes()).map_err(|_| DoorbellError::Name(name.clone()))?;
         let shm = SharedMemoryBuilder::new(&file)
             .creation_mode(CreationMode::CreateExclusive)
-            .size(processes.max(1) * std::mem::size_of::<Slot>())
+            .size((processes + 1) * std::mem::size_of::<Slot>())
             .create()
             .map_err(|source| DoorbellError::Map { name, source })?;
         Ok(Self {
@@ -116,7 +126,7 @@ impl Doorbell {
                 name: name.clone(),
                 source,
             })?;
-        let found = shm.size() / std::mem::size_of::<Slot>();
+        let found = (shm.size() / std::mem::size_of::<Slot>()).saturating_sub(1);
         if found < processes {
             return Err(DoorbellError::Size {
                 name,
@@ -130,18 +140,53 @@ impl Doorbell {
         })
     }
 
-    fn counter(&self, i: usize) -> &AtomicU32 {
-        assert!(i < self.slots, "process {i} of {}", self.slots);
-        // SAFETY: the mapping is page aligned and holds `slots` `Slot`s (checked
-        // at open); `Slot` is an `AtomicU32` padded to 64 bytes, valid for any
-        // bit pattern, and every access to it, here and in other processes, is
-        // atomic. The reference lives no longer than `self`, which keeps the
-        // mapping.
+    /// Slot `i`; slot `slots` is the tick's count of processes stepping.
+    fn slot(&self, i: usize) -> &Slot {
+        assert!(i <= self.slots, "slot {i} of {}", self.slots);
+        // SAFETY: the mapping is page aligned and holds `slots + 1` `Slot`s
+        // (checked at open); a `Slot` is two `AtomicU32`s padded to 64 bytes,
+        // valid for any bit pattern, and every access to it, here and in
+        // other processes, is atomic. The reference lives no longer than
+        // `self`, which keeps the mapping.
         #[allow(unsafe_code)]
         unsafe {
-            let slot = self.shm.base_address().as_ptr().cast::<Slot>().add(i);
-            &(*slot).seq
+            &*self.shm.base_address().as_ptr().cast::<Slot>().add(i)
         }
+    }
+
+    fn counter(&self, i: usize) -> &AtomicU32 {
+        assert!(i < self.slots, "process {i} of {}", self.slots);
+        &self.slot(i).seq
+    }
+
+    /// The count of processes of the tick still stepping.
+    fn stepping(&self) -> &AtomicU32 {
+        &self.slot(self.slots).seq
+    }
+
+    /// Sets the count of processes due at the tick about to be rung (the
+    /// orchestrator, before it rings them).
+    pub fn arm(&self, due: usize) {
+        self.stepping()
+            .store(u32::try_from(due).unwrap_or(u32::MAX), Ordering::Release);
+    }
+
+    /// Process `i` has finished the step of wake-up `seq`; true when it was
+    /// the last of its tick to finish, and so must notify `done`.
+    pub fn finished(&self, i: usize, seq: u32) -> bool {
+        assert!(i < self.slots, "process {i} of {}", self.slots);
+        self.slot(i).done.store(seq, Ordering::Release);
+        // Never below zero: a step the count did not include (it cannot
+        // happen in lockstep) would otherwise hide every later tick's end.
+        self.stepping()
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| n.checked_sub(1))
+            .is_ok_and(|n| n == 1)
+    }
+
+    /// True when process `i` has finished the step of its latest wake-up.
+    pub fn is_done(&self, i: usize) -> bool {
+        let s = self.slot(i);
+        s.done.load(Ordering::Acquire) == s.seq.load(Ordering::Acquire)
     }
 
     /// Process `i`'s counter now.
@@ -239,6 +284,25 @@ mod tests {
         bell.ring(0);
         bell.ring(0);
         assert_eq!(bell.wait(0, 0, Duration::from_secs(10)), Some(2));
+    }
+
+    #[test]
+    fn only_the_last_process_of_a_tick_to_finish_is_told_to_notify() {
+        let id = run_id("d");
+        let bell = Doorbell::create(&id, 3).unwrap();
+        assert!((0..3).all(|i| bell.is_done(i)), "nothing rung yet");
+        bell.arm(2);
+        bell.ring(0);
+        bell.ring(2);
+        assert!(!bell.is_done(0) && bell.is_done(1) && !bell.is_done(2));
+        assert!(!bell.finished(2, bell.seq(2)), "one still stepping");
+        assert!(bell.is_done(2) && !bell.is_done(0));
+        assert!(bell.finished(0, bell.seq(0)), "the last one notifies");
+        assert!((0..3).all(|i| bell.is_done(i)));
+        assert!(
+            !bell.finished(1, bell.seq(1)),
+            "a step not counted is no tick's end"
+        );
     }
 
     #[test]

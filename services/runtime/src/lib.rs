@@ -11,7 +11,8 @@
 //!   shared memory) on the ticks where it is due; the
 //!   process steps on the samples stamped *before* this tick (later ones are
 //!   held back for the next step, so the result does not depend on who ran
-//!   first), then notifies `done` with its own event id.
+//!   first), then marks its step finished in its doorbell slot; the last
+//!   process of the tick to finish notifies `done` with its own event id.
 //! - **realtime**: the process wakes on its own interval on the wall clock;
 //!   a wake-up later than one period is a deadline miss.
 //!
@@ -600,12 +601,16 @@ impl<S: Service> Runtime<S> {
                 }
                 report.steps += 1;
                 stats.after_step(&ctx, mono_ns().saturating_sub(wake_mono_ns), report);
-                if let Err(e) = done.notify() {
-                    failure = Some(RuntimeError::Io {
-                        service: "done".into(),
-                        source: Box::new(e),
-                    });
-                    return false;
+                // Only the last process of the tick to finish wakes the
+                // orchestrator; it reads the others' slots.
+                if bell.finished(me, *seen) {
+                    if let Err(e) = done.notify() {
+                        failure = Some(RuntimeError::Io {
+                            service: "done".into(),
+                            source: Box::new(e),
+                        });
+                        return false;
+                    }
                 }
                 if spin_ns == 0 {
                     // Blocking: the next wake-up comes after the orchestrator
