@@ -2,7 +2,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use ipc_types::Sample;
@@ -71,9 +71,53 @@ pub enum WriterError {
     UnknownChannel(u16),
 }
 
+/// A buffered file that keeps count of its own position.
+///
+/// The MCAP writer asks for the stream position once per channel at the end
+/// of every chunk (the message index offsets); `BufWriter` answered each
+/// question by writing out its buffer and calling lseek(2). Measured with
+/// `shoal bench step --syscalls` on the paper scenario: the recorder made
+/// 5.6 lseek and 5.0 write calls per step; this answers from the count.
+struct Counted<W: Write + Seek> {
+    inner: BufWriter<W>,
+    pos: u64,
+}
+
+impl<W: Write + Seek> Counted<W> {
+    fn new(inner: BufWriter<W>) -> Self {
+        Self { inner, pos: 0 }
+    }
+}
+
+impl<W: Write + Seek> Write for Counted<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.pos += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+impl<W: Write + Seek> Seek for Counted<W> {
+    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
+        if to == SeekFrom::Current(0) {
+            return Ok(self.pos);
+        }
+        self.pos = self.inner.seek(to)?;
+        Ok(self.pos)
+    }
+
+    fn stream_position(&mut self) -> std::io::Result<u64> {
+        Ok(self.pos)
+    }
+}
+
 /// Writes samples to one MCAP file.
 pub struct RecordingWriter {
-    writer: mcap::Writer<BufWriter<File>>,
+    writer: mcap::Writer<Counted<File>>,
     schemas: HashMap<&'static str, u16>,
     /// Per channel id: the bag's topic, its message count kept current.
     topics: BTreeMap<u16, rosbag2::Topic>,
@@ -105,7 +149,7 @@ impl RecordingWriter {
             .chunk_size(Some(opts.chunk_bytes))
             .profile("ros2")
             .library(format!("shoal {}", env!("CARGO_PKG_VERSION")))
-            .create(BufWriter::with_capacity(1 << 20, file))?;
+            .create(Counted::new(BufWriter::with_capacity(1 << 20, file)))?;
         Ok(Self {
             writer,
             schemas: HashMap::new(),
@@ -277,5 +321,30 @@ impl RecordingWriter {
         )?;
         self.writer.finish()?;
         Ok(self.messages)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use std::io::Cursor;
+
+    #[test]
+    fn a_counted_file_knows_its_position_and_seeks_as_the_file_does() {
+        let mut w = Counted::new(BufWriter::new(Cursor::new(Vec::new())));
+        w.write_all(b"hello, ").unwrap();
+        assert_eq!(w.stream_position().unwrap(), 7);
+        w.write_all(b"world").unwrap();
+        assert_eq!(w.seek(SeekFrom::Current(0)).unwrap(), 12);
+        // A header rewritten in place, then back to the end.
+        assert_eq!(w.seek(SeekFrom::Start(0)).unwrap(), 0);
+        w.write_all(b"H").unwrap();
+        assert_eq!(w.stream_position().unwrap(), 1);
+        assert_eq!(w.seek(SeekFrom::End(0)).unwrap(), 12);
+        w.write_all(b"!").unwrap();
+        assert_eq!(w.stream_position().unwrap(), 13);
+        w.flush().unwrap();
+        assert_eq!(w.inner.get_ref().get_ref().as_slice(), b"Hello, world!");
     }
 }

@@ -128,6 +128,8 @@ pub fn run(cmd: StepCmd) -> anyhow::Result<()> {
     let qos = launch::idle_poll_guard(settings.idle_poll)?;
     // The floor a step can reach: one blocking wake-up, measured here now.
     let wake_us = sys::wake_up_cpu_us(20_000).context("the wake-up reference")?;
+    // The same through the doorbell that wakes a lockstep process.
+    let futex_us = sys::futex_wake_up_cpu_us(20_000).context("the doorbell wake-up reference")?;
     let mut pairs = Vec::new();
     for i in 0..cmd.repeat {
         let mut pair = Vec::new();
@@ -158,8 +160,10 @@ pub fn run(cmd: StepCmd) -> anyhow::Result<()> {
         fmt_num(launch::os::load_average().unwrap_or(f64::NAN))
     );
     println!(
-        "  one blocking wake-up (two threads, Unix datagram ping-pong): {} us of CPU{}",
+        "  one blocking wake-up (two threads, Unix datagram ping-pong): {} us of CPU; \
+         by the lockstep doorbell (futex): {} us{}",
         fmt_num(wake_us),
+        fmt_num(futex_us),
         if qos.is_some() {
             "; idle CPUs poll (/dev/cpu_dma_latency held at 0)"
         } else {
@@ -243,6 +247,7 @@ pub fn run(cmd: StepCmd) -> anyhow::Result<()> {
     let json = scratch.path.with_extension("json");
     let report = serde_json::json!({
         "wake_up_us": wake_us,
+        "wake_up_futex_us": futex_us,
         "idle_poll": qos.is_some(),
         "kinds": figures,
     });

@@ -97,6 +97,43 @@ pub fn wake_up_cpu_us(rounds: u32) -> std::io::Result<f64> {
     Ok(cpu * 1e6 / (2.0 * f64::from(rounds.max(1))))
 }
 
+/// CPU time of one blocking wake-up through the lockstep doorbell (a futex
+/// in shared memory, as the orchestrator wakes a process): two threads
+/// ring each other `rounds` times, each on a mapping of its own; µs.
+pub fn futex_wake_up_cpu_us(rounds: u32) -> anyhow::Result<f64> {
+    use shoal_runtime::Doorbell;
+    let id = format!("wakeref{}", std::process::id());
+    let bell = Doorbell::create(&id, 2)?;
+    // Waits for slot `i` to move past `seen`.
+    fn next(bell: &Doorbell, i: usize, seen: u32) -> u32 {
+        loop {
+            if let Some(s) = bell.wait(i, seen, std::time::Duration::from_secs(1)) {
+                return s;
+            }
+        }
+    }
+    let echo_id = id.clone();
+    let echo = std::thread::spawn(move || -> anyhow::Result<()> {
+        let bell = Doorbell::open(&echo_id, 2)?;
+        let mut seen = 0;
+        for _ in 0..rounds {
+            seen = next(&bell, 0, seen);
+            bell.ring(1);
+        }
+        Ok(())
+    });
+    let before = self_cpu_s();
+    let mut seen = 0;
+    for _ in 0..rounds {
+        bell.ring(0);
+        seen = next(&bell, 1, seen);
+    }
+    echo.join()
+        .map_err(|_| anyhow::anyhow!("the echo thread panicked"))??;
+    let cpu = self_cpu_s() - before;
+    Ok(cpu * 1e6 / (2.0 * f64::from(rounds.max(1))))
+}
+
 /// Waits until `fd` is readable or `timeout` has passed: `Ok(true)` if it
 /// is, `Ok(false)` on the timeout or a signal (the caller checks for a
 /// termination request).
