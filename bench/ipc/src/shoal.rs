@@ -3,7 +3,8 @@
 //! with a per-vehicle channel's limits ([`ChannelLimits::vehicle`]), header
 //! stamping and the finite check on publish, the finite check, sequence
 //! accounting and latency histogram on take, and (blocking case) the
-//! runtime's wake event and a `WaitSet` as in the service run loop.
+//! runtime's event service (`open_wake`) and a `WaitSet`, as a dataflow
+//! stage waits on its inputs.
 
 use std::time::Duration;
 

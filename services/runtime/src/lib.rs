@@ -1048,7 +1048,9 @@ pub fn open_arrival<S: Service>(
     })
 }
 
-/// Opens one process's lockstep wake-up event service.
+/// Opens a process's wake-up event service (one event id, the runtime's
+/// limits): the event `shoal bench ipc` measures in its `shoal-event` case.
+/// A lockstep process is woken through the run's [`Doorbell`] instead.
 pub fn open_wake<S: Service>(
     node: &Node<S>,
     run_id: &str,
