@@ -647,12 +647,13 @@ impl Tally {
         }
     }
 
-    /// Settles every pending process whose doorbell slot says it finished.
-    fn read(&mut self, bell: &shoal_runtime::Doorbell) {
+    /// Settles every pending process of `expected` (the tick's) whose
+    /// doorbell slot says it finished.
+    fn read(&mut self, bell: &shoal_runtime::Doorbell, expected: &[usize]) {
         if self.remaining == 0 {
             return;
         }
-        for i in 0..self.n {
+        for &i in expected {
             if self.pending[i] && bell.is_done(i) {
                 self.settle(i);
             }
@@ -761,7 +762,7 @@ pub(crate) fn wait_done(
     let slice = Duration::from_millis(50);
     // Adaptive wait: poll first, for at most the spin budget.
     while t.remaining > 0 && start.elapsed() < spin {
-        t.read(&ports.bell);
+        t.read(&ports.bell, expected);
         std::hint::spin_loop();
     }
     loop {
@@ -788,7 +789,7 @@ pub(crate) fn wait_done(
             .done
             .try_wait(|ev| t.on(ev.id.as_value()))
             .context("taking done")?;
-        t.read(&ports.bell);
+        t.read(&ports.bell, expected);
         if t.remaining == 0 && t.ready.is_empty() && !ports.recovery.any_awaiting() {
             break;
         }

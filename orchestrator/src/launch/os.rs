@@ -70,40 +70,55 @@ pub fn hold_cpu_latency() -> Option<std::fs::File> {
     Some(f)
 }
 
-/// CPU time of one blocking wake-up on this machine, µs: two threads
-/// bounce a byte over a Unix datagram socket pair `rounds` times, each
-/// blocking in `recv` until the other's `send` wakes it; the process's CPU
-/// over the wake-ups (two per round).
-pub fn wake_up_cpu_us(rounds: u32) -> std::io::Result<f64> {
-    use std::os::unix::net::UnixDatagram;
-    let (a, b) = UnixDatagram::pair()?;
-    let echo = std::thread::spawn(move || -> std::io::Result<()> {
-        let mut buf = [0u8; 1];
-        for _ in 0..rounds {
-            b.recv(&mut buf)?;
-            b.send(&buf)?;
-        }
-        Ok(())
-    });
-    let mut buf = [0u8; 1];
+/// CPU time of one blocking wake-up, µs: `echo`, on a thread of its own,
+/// answers `rounds` round trips that `ping` starts one at a time here; the
+/// process's CPU over the wake-ups (two per round).
+fn ping_pong_cpu_us(
+    rounds: u32,
+    echo: impl FnOnce() -> anyhow::Result<()> + Send + 'static,
+    mut ping: impl FnMut() -> anyhow::Result<()>,
+) -> anyhow::Result<f64> {
+    let echo = std::thread::spawn(echo);
     let before = self_cpu_s();
     for _ in 0..rounds {
-        a.send(&buf)?;
-        a.recv(&mut buf)?;
+        ping()?;
     }
     echo.join()
-        .map_err(|_| std::io::Error::other("the echo thread panicked"))??;
+        .map_err(|_| anyhow::anyhow!("the echo thread panicked"))??;
     let cpu = self_cpu_s() - before;
     Ok(cpu * 1e6 / (2.0 * f64::from(rounds.max(1))))
 }
 
+/// CPU time of one blocking wake-up on this machine, µs: two threads
+/// bounce a byte over a Unix datagram socket pair, each blocking in `recv`
+/// until the other's `send` wakes it.
+pub fn wake_up_cpu_us(rounds: u32) -> anyhow::Result<f64> {
+    use std::os::unix::net::UnixDatagram;
+    let (a, b) = UnixDatagram::pair()?;
+    let mut buf = [0u8; 1];
+    ping_pong_cpu_us(
+        rounds,
+        move || {
+            let mut buf = [0u8; 1];
+            for _ in 0..rounds {
+                b.recv(&mut buf)?;
+                b.send(&buf)?;
+            }
+            Ok(())
+        },
+        || {
+            a.send(&buf)?;
+            a.recv(&mut buf)?;
+            Ok(())
+        },
+    )
+}
+
 /// CPU time of one blocking wake-up through the lockstep doorbell (a futex
-/// in shared memory, as the orchestrator wakes a process): two threads
-/// ring each other `rounds` times, each on a mapping of its own; µs.
+/// in shared memory, as the orchestrator wakes a process), µs: two threads
+/// ring each other, each on a mapping of its own.
 pub fn futex_wake_up_cpu_us(rounds: u32) -> anyhow::Result<f64> {
     use shoal_runtime::Doorbell;
-    let id = format!("wakeref{}", std::process::id());
-    let bell = Doorbell::create(&id, 2)?;
     // Waits for slot `i` to move past `seen`.
     fn next(bell: &Doorbell, i: usize, seen: u32) -> u32 {
         loop {
@@ -112,26 +127,26 @@ pub fn futex_wake_up_cpu_us(rounds: u32) -> anyhow::Result<f64> {
             }
         }
     }
-    let echo_id = id.clone();
-    let echo = std::thread::spawn(move || -> anyhow::Result<()> {
-        let bell = Doorbell::open(&echo_id, 2)?;
-        let mut seen = 0;
-        for _ in 0..rounds {
-            seen = next(&bell, 0, seen);
-            bell.ring(1);
-        }
-        Ok(())
-    });
-    let before = self_cpu_s();
+    let id = format!("wakeref{}", std::process::id());
+    let bell = Doorbell::create(&id, 2)?;
     let mut seen = 0;
-    for _ in 0..rounds {
-        bell.ring(0);
-        seen = next(&bell, 1, seen);
-    }
-    echo.join()
-        .map_err(|_| anyhow::anyhow!("the echo thread panicked"))??;
-    let cpu = self_cpu_s() - before;
-    Ok(cpu * 1e6 / (2.0 * f64::from(rounds.max(1))))
+    ping_pong_cpu_us(
+        rounds,
+        move || {
+            let bell = Doorbell::open(&id, 2)?;
+            let mut seen = 0;
+            for _ in 0..rounds {
+                seen = next(&bell, 0, seen);
+                bell.ring(1);
+            }
+            Ok(())
+        },
+        || {
+            bell.ring(0);
+            seen = next(&bell, 1, seen);
+            Ok(())
+        },
+    )
 }
 
 /// Waits until `fd` is readable or `timeout` has passed: `Ok(true)` if it

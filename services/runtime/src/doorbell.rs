@@ -96,14 +96,22 @@ pub fn doorbell_name(run_id: &str) -> String {
     format!("{}doorbell", domain_prefix(run_id))
 }
 
+/// The doorbell's name, and as the file name shared memory is opened by.
+fn file_name(run_id: &str) -> Result<(String, FileName), DoorbellError> {
+    let name = doorbell_name(run_id);
+    match FileName::new(name.as_bytes()) {
+        Ok(file) => Ok((name, file)),
+        Err(_) => Err(DoorbellError::Name(name)),
+    }
+}
+
 impl Doorbell {
     /// Creates the doorbell of a run of `processes` processes, every counter
     /// zero (the orchestrator, before it starts any process); one that
     /// exists already is an error, never taken over. It is removed when this
     /// value drops.
     pub fn create(run_id: &str, processes: usize) -> Result<Self, DoorbellError> {
-        let name = doorbell_name(run_id);
-        let file = FileName::new(name.as_bytes()).map_err(|_| DoorbellError::Name(name.clone()))?;
+        let (name, file) = file_name(run_id)?;
         let shm = SharedMemoryBuilder::new(&file)
             .creation_mode(CreationMode::CreateExclusive)
             .size((processes + 1) * std::mem::size_of::<Slot>())
@@ -118,8 +126,7 @@ impl Doorbell {
     /// Opens the doorbell of a run of `processes` processes (a process of
     /// the run; it never removes it).
     pub fn open(run_id: &str, processes: usize) -> Result<Self, DoorbellError> {
-        let name = doorbell_name(run_id);
-        let file = FileName::new(name.as_bytes()).map_err(|_| DoorbellError::Name(name.clone()))?;
+        let (name, file) = file_name(run_id)?;
         let shm = SharedMemoryBuilder::new(&file)
             .open_existing(AccessMode::ReadWrite)
             .map_err(|source| DoorbellError::Map {

@@ -510,10 +510,7 @@ impl<S: Service> Runtime<S> {
         mut task: T,
         stats: &mut stats::StatsReporter<S>,
         report: &mut RunReport,
-    ) -> Result<(), RuntimeError>
-    where
-        iceoryx2::port::listener::Listener<S>: SynchronousMultiplexing,
-    {
+    ) -> Result<(), RuntimeError> {
         let me = self.args.index;
         let bell = Doorbell::open(&self.args.run_id, self.args.processes).map_err(|e| {
             RuntimeError::Port {
@@ -548,9 +545,8 @@ impl<S: Service> Runtime<S> {
         let mut clock = clock;
         let mut latest_clock: Option<Clock> = None;
         let spin_ns = self.args.spin_us * 1_000;
-        // Steps on the wake-up just polled; false once the run must end.
         // Steps on a wake-up (the doorbell counter now `now`, last stepped
-        // on `seen`).
+        // on `seen`); false once the run must end.
         let mut on_wake = |now: u32, seen: &mut u32| -> bool {
             // Step on every wake-up; with a spin budget, poll for the next
             // one before going back to block.
