@@ -112,6 +112,12 @@ pub(crate) struct Ports {
     bell: shoal_runtime::Doorbell,
     /// By process index: true for a process this host runs (it rings only those).
     local: Vec<bool>,
+    /// By process index: true for a process whose step a tick's end does
+    /// not wait for ([`ProcessKind::detached`]); it must be over before the
+    /// process is rung again. All false unless [`Ports::detach`] set them.
+    detached: Vec<bool>,
+    /// The tick rung last.
+    tick: u64,
     /// Sequence number of the next clock sample.
     clock_seq: u64,
     /// The run's events.
@@ -147,6 +153,7 @@ impl Ports {
         let bell =
             shoal_runtime::Doorbell::create(run_id, procs.len()).context("lockstep doorbell")?;
         let local = procs.iter().map(local).collect();
+        let detached = vec![false; procs.len()];
         let journal = Journal::open(&node, run_id)?;
         Ok(Self {
             node,
@@ -155,6 +162,8 @@ impl Ports {
             done,
             bell,
             local,
+            detached,
+            tick: 0,
             clock_seq: 0,
             journal,
             recovery: Recovery::abort(procs.len()),
@@ -186,20 +195,61 @@ impl Ports {
         };
         self.clock_seq += 1;
         self.clock.publish_stamped(clock)?;
-        self.bell.arm(due.len());
+        self.tick = tick;
+        self.bell
+            .arm(due.iter().filter(|&&i| !self.detached[i]).count());
         for &i in due {
             self.wake(i, procs)?;
         }
         Ok(())
     }
 
-    /// Wakes process `i` (a process of this host).
+    /// Wakes process `i` (a process of this host) for the tick rung last.
     pub(crate) fn wake(&self, i: usize, procs: &[ProcessSpec]) -> anyhow::Result<()> {
         if !self.local.get(i).copied().unwrap_or(false) {
             anyhow::bail!("{} does not run on this host", procs[i].label());
         }
-        self.bell.ring(i);
+        self.bell.ring(i, self.tick, !self.detached[i]);
         Ok(())
+    }
+
+    /// Lets the ticks' ends not wait for the steps of `procs`' detached
+    /// kinds (a whole run on one host; see [`ProcessKind::detached`]).
+    pub(crate) fn detach(&mut self, procs: &[ProcessSpec]) {
+        for p in procs {
+            self.detached[p.index] = p.kind.detached();
+        }
+    }
+
+    /// True when `i` is detached and was rung for a step it has not
+    /// finished (a restarted one never will, until it is rung again).
+    fn owes(&self, i: usize) -> bool {
+        self.detached[i] && !self.bell.is_done(i)
+    }
+
+    /// Waits until no detached process among `among` owes a step. What
+    /// happens meanwhile (a death) is dated at the earliest step owed.
+    fn settle_detached(
+        &mut self,
+        sup: &mut Supervisor,
+        procs: &[ProcessSpec],
+        among: impl IntoIterator<Item = usize>,
+        opts: &RunOptions,
+    ) -> anyhow::Result<()> {
+        let owed: Vec<usize> = among.into_iter().filter(|&i| self.owes(i)).collect();
+        let Some(tick) = owed.iter().map(|&i| self.bell.tick(i)).min() else {
+            return Ok(());
+        };
+        let sim_time_s = tick as f64 * opts.scenario.rates.tick_s;
+        wait_done(
+            self,
+            sup,
+            procs,
+            &owed,
+            opts.tick_timeout,
+            sim_time_s,
+            Duration::from_micros(opts.spin_us),
+        )
     }
 }
 
@@ -453,10 +503,17 @@ fn lockstep(
     );
     let start = Instant::now();
     let mut due: Vec<usize> = Vec::with_capacity(procs.len());
+    let mut awaited: Vec<usize> = Vec::with_capacity(procs.len());
     let injections = injections(scenario);
     let mut next_injection = 0;
+    ports.detach(procs);
     for tick in 0..ticks {
         let sim = tick * tick_ns;
+        let sim_s = sim as f64 / 1e9;
+        if next_injection < injections.len() && injections[next_injection].0 <= tick {
+            // A fault strikes a process between its steps, detached or not.
+            ports.settle_detached(sup, procs, 0..procs.len(), opts)?;
+        }
         while next_injection < injections.len() && injections[next_injection].0 <= tick {
             inject(
                 injections[next_injection].1,
@@ -472,14 +529,18 @@ fn lockstep(
         if due.is_empty() {
             continue;
         }
+        // A detached process's last step must be over before its next.
+        ports.settle_detached(sup, procs, due.iter().copied(), opts)?;
         ports.start_tick(tick, ticks, tick_ns, &due, procs)?;
+        awaited.clear();
+        awaited.extend(due.iter().copied().filter(|&i| !ports.detached[i]));
         wait_done(
             ports,
             sup,
             procs,
-            &due,
+            &awaited,
             opts.tick_timeout,
-            sim as f64 / 1e9,
+            sim_s,
             Duration::from_micros(opts.spin_us),
         )?;
         ports.recovery.track_truths();
@@ -487,6 +548,8 @@ fn lockstep(
             bar.set_position((sim as f64 * 1e-9) as u64);
         }
     }
+    // The run's steps are over when the detached ones are too.
+    ports.settle_detached(sup, procs, 0..procs.len(), opts)?;
     bar.finish_and_clear();
     Ok((start.elapsed().as_secs_f64(), ticks))
 }
@@ -768,10 +831,11 @@ pub(crate) fn wait_done(
     loop {
         // A restarted process that is ready takes the step it owes.
         for i in std::mem::take(&mut t.ready) {
+            // (A detached one owes it even when this wait is not for it.)
             if ports
                 .recovery
                 .ready(i, procs, &mut ports.journal, sim_time_s)
-                && t.pending[i]
+                && (t.pending[i] || ports.owes(i))
             {
                 // Its clock subscriber gets the tick in progress, then the wake-up.
                 ports.clock.update_connections()?;

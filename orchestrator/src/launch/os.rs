@@ -137,12 +137,12 @@ pub fn futex_wake_up_cpu_us(rounds: u32) -> anyhow::Result<f64> {
             let mut seen = 0;
             for _ in 0..rounds {
                 seen = next(&bell, 0, seen);
-                bell.ring(1);
+                bell.ring(1, 0, true);
             }
             Ok(())
         },
         || {
-            bell.ring(0);
+            bell.ring(0, 0, true);
             seen = next(&bell, 1, seen);
             Ok(())
         },

@@ -16,6 +16,13 @@
 //! Which processes have finished is read from their slots, so a count that
 //! a death left too high costs a wait's slice, never a wrong answer.
 //!
+//! A ring also carries the tick it is for, and whether the tick's count
+//! includes the step. A step it does not include is one the orchestrator
+//! does not wait for at the tick's end (the recorder's, which only has to
+//! be over before it is rung again): that process notifies `done` itself,
+//! and takes its tick from its slot, since the clock may have moved on by
+//! the time it runs.
+//!
 //! It replaced an iceoryx2 event per process, whose Unix datagram socket
 //! cost the orchestrator a `sendto` and the process a `ppoll` and one or two
 //! `recvfrom` per step. A futex wake carries no data and needs neither: on
@@ -27,7 +34,7 @@
 //! wake-up for it: a process reads its counter before it reports ready, so
 //! a restarted process steps only when the orchestrator rings it anew.
 
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::time::Duration;
 
 use iceoryx2::prelude::{FileName, SemanticString};
@@ -45,6 +52,11 @@ struct Slot {
     seq: AtomicU32,
     /// The wake-up whose step the process finished last.
     done: AtomicU32,
+    /// Nonzero when the tick's count of processes stepping includes the
+    /// step of the latest wake-up.
+    counted: AtomicU32,
+    /// The tick of the latest wake-up.
+    tick: AtomicU64,
 }
 
 /// Why the doorbell could not be made or opened.
@@ -178,11 +190,16 @@ impl Doorbell {
             .store(u32::try_from(due).unwrap_or(u32::MAX), Ordering::Release);
     }
 
-    /// Process `i` has finished the step of wake-up `seq`; true when it was
-    /// the last of its tick to finish, and so must notify `done`.
+    /// Process `i` has finished the step of wake-up `seq`; true when it
+    /// must notify `done`: it was the last of its tick to finish, or its
+    /// step was not counted in the tick.
     pub fn finished(&self, i: usize, seq: u32) -> bool {
         assert!(i < self.slots, "process {i} of {}", self.slots);
-        self.slot(i).done.store(seq, Ordering::Release);
+        let slot = self.slot(i);
+        slot.done.store(seq, Ordering::Release);
+        if slot.counted.load(Ordering::Acquire) == 0 {
+            return true;
+        }
         // Never below zero: a step the count did not include (it cannot
         // happen in lockstep) would otherwise hide every later tick's end.
         self.stepping()
@@ -201,9 +218,20 @@ impl Doorbell {
         self.counter(i).load(Ordering::Acquire)
     }
 
-    /// Wakes process `i`: one step.
-    pub fn ring(&self, i: usize) {
+    /// The tick of process `i`'s latest wake-up (read after the wake-up
+    /// itself, it is the tick rung with it).
+    pub fn tick(&self, i: usize) -> u64 {
+        self.slot(i).tick.load(Ordering::Acquire)
+    }
+
+    /// Wakes process `i` for one step at `tick`; `counted` when the count
+    /// [`Doorbell::arm`] set includes that step.
+    pub fn ring(&self, i: usize, tick: u64, counted: bool) {
         let c = self.counter(i);
+        let slot = self.slot(i);
+        slot.tick.store(tick, Ordering::Relaxed);
+        slot.counted.store(u32::from(counted), Ordering::Relaxed);
+        // Release: a process that sees the new counter sees both above.
         c.fetch_add(1, Ordering::Release);
         futex(c, libc::FUTEX_WAKE, 1, None);
     }
@@ -277,7 +305,7 @@ mod tests {
         });
         is_open.recv().unwrap();
         std::thread::sleep(Duration::from_millis(20));
-        owner.ring(1);
+        owner.ring(1, 0, true);
         let (got, s0, s2) = waiter.join().unwrap();
         assert_eq!(got, Some(seen.wrapping_add(1)));
         assert_eq!((s0, s2), (0, 0), "the other slots did not move");
@@ -288,8 +316,8 @@ mod tests {
         let id = run_id("b");
         let bell = Doorbell::create(&id, 2).unwrap();
         assert_eq!(bell.wait(0, 0, Duration::from_millis(10)), None);
-        bell.ring(0);
-        bell.ring(0);
+        bell.ring(0, 0, true);
+        bell.ring(0, 1, true);
         assert_eq!(bell.wait(0, 0, Duration::from_secs(10)), Some(2));
     }
 
@@ -299,17 +327,40 @@ mod tests {
         let bell = Doorbell::create(&id, 3).unwrap();
         assert!((0..3).all(|i| bell.is_done(i)), "nothing rung yet");
         bell.arm(2);
-        bell.ring(0);
-        bell.ring(2);
+        bell.ring(0, 0, true);
+        bell.ring(2, 0, true);
         assert!(!bell.is_done(0) && bell.is_done(1) && !bell.is_done(2));
         assert!(!bell.finished(2, bell.seq(2)), "one still stepping");
         assert!(bell.is_done(2) && !bell.is_done(0));
         assert!(bell.finished(0, bell.seq(0)), "the last one notifies");
         assert!((0..3).all(|i| bell.is_done(i)));
+        // Rung as counted, but past the count (it cannot happen in lockstep).
+        bell.ring(1, 1, true);
         assert!(
             !bell.finished(1, bell.seq(1)),
-            "a step not counted is no tick's end"
+            "a step the count no longer holds is no tick's end"
         );
+    }
+
+    #[test]
+    fn a_step_the_tick_does_not_count_notifies_itself_and_keeps_its_tick() {
+        let id = run_id("e");
+        let bell = Doorbell::create(&id, 3).unwrap();
+        bell.arm(2);
+        bell.ring(0, 40, false);
+        bell.ring(1, 40, true);
+        bell.ring(2, 40, true);
+        assert!(bell.finished(0, bell.seq(0)), "uncounted: it notifies");
+        assert!(
+            !bell.finished(1, bell.seq(1)),
+            "the uncounted step left the count at two"
+        );
+        assert!(bell.finished(2, bell.seq(2)), "the last counted one");
+        // The next tick rings process 1 alone: process 0's slot keeps 40.
+        bell.arm(1);
+        bell.ring(1, 41, true);
+        assert_eq!((bell.tick(0), bell.tick(1), bell.tick(2)), (40, 41, 40));
+        assert!(bell.is_done(0) && !bell.is_done(1) && bell.is_done(2));
     }
 
     #[test]

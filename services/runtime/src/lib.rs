@@ -576,14 +576,21 @@ impl<S: Service> Runtime<S> {
                 let Some(c) = latest_clock else {
                     return true;
                 };
-                let sim = c.header.sim_time_ns;
+                // The tick rung: the clock's newest unless this step is one
+                // the orchestrator does not wait for, and the clock moved on.
+                let rung = bell.tick(me);
+                let (sim, tick, last) = if c.tick == rung {
+                    (c.header.sim_time_ns, c.tick, c.last != 0)
+                } else {
+                    (rung.saturating_mul(c.tick_ns), rung, false)
+                };
                 let wake_mono_ns = mono_ns();
                 let ctx = StepContext {
                     sim_time_ns: sim,
-                    tick: c.tick,
+                    tick,
                     wake_mono_ns,
                     since_last_ns: last_sim.map_or(0, |l| sim.saturating_sub(l)),
-                    last: c.last != 0,
+                    last,
                     mode: Mode::Lockstep,
                     woken_by: Wake::Tick,
                 };
@@ -598,7 +605,8 @@ impl<S: Service> Runtime<S> {
                 report.steps += 1;
                 stats.after_step(&ctx, mono_ns().saturating_sub(wake_mono_ns), report);
                 // Only the last process of the tick to finish wakes the
-                // orchestrator; it reads the others' slots.
+                // orchestrator (it reads the others' slots), and one whose
+                // step the tick did not count.
                 if bell.finished(me, *seen) {
                     if let Err(e) = done.notify() {
                         failure = Some(RuntimeError::Io {

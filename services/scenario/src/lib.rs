@@ -612,6 +612,17 @@ impl ProcessKind {
     }
 }
 
+impl ProcessKind {
+    /// True for a kind whose lockstep step no other process waits for: the
+    /// recorder only drains what was published before its tick and nothing
+    /// reads what it writes, so its step need only be over before it is
+    /// rung again, and it runs alongside the frame's later stages instead
+    /// of holding its own stage open.
+    pub const fn detached(self) -> bool {
+        matches!(self, ProcessKind::Recorder)
+    }
+}
+
 /// What the follower's camera gives camera-pose (`[camera] model`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
