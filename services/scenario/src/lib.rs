@@ -593,7 +593,8 @@ impl ProcessKind {
     }
 
     /// Pipeline stage within one lockstep frame: plant → world → sensors →
-    /// planner → mpc → (plant). The recorder drains with the plant. With
+    /// planner → mpc → (plant). The recorder is rung with the plant, and no
+    /// tick's end waits for it ([`ProcessKind::detached`]). With
     /// camera images, the camera's renderer takes the sensors' stage and
     /// camera-pose, planner and mpc each move one stage later (six stages).
     pub const fn stage(self, model: CameraModel) -> u64 {
