@@ -200,8 +200,9 @@ impl Doorbell {
         if slot.counted.load(Ordering::Acquire) == 0 {
             return true;
         }
-        // Never below zero: a step the count did not include (it cannot
-        // happen in lockstep) would otherwise hide every later tick's end.
+        // Never below zero: a counted step the count no longer holds (it
+        // cannot happen in lockstep) would otherwise hide every later
+        // tick's end.
         self.stepping()
             .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| n.checked_sub(1))
             .is_ok_and(|n| n == 1)
