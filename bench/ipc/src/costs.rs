@@ -20,6 +20,10 @@ use crate::{cause, raw_config, BenchError, Cause, PeerConfig};
 /// Batches per figure; the fastest counts.
 const REPEATS: usize = 25;
 
+/// How long the stamp clock is checked against the exact clock, ns: past
+/// its calibration span, with pauses longer than its window.
+pub const STAMP_CHECK_NS: u64 = 60_000_000;
+
 /// Per-call costs of shoal's per-sample steps for one sample size, ns.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CostReport {
@@ -36,6 +40,14 @@ pub struct CostReport {
     pub fields_ns: f64,
     /// `shoal_runtime::mono_ns` (header stamp on publish, latency on take).
     pub mono_ns_ns: f64,
+    /// `shoal_runtime::stamp_ns`, the clock of the hop stamps (on publish
+    /// and on take): `CLOCK_MONOTONIC` through the time-stamp counter.
+    pub stamp_ns_ns: f64,
+    /// Stamps taken, each between two exact reads, for [`STAMP_CHECK_NS`].
+    pub stamp_checked: u64,
+    /// The farthest any of them lay outside its two exact reads, ns (0 if
+    /// all inside).
+    pub stamp_off_ns: f64,
     /// `LatencyRecorder::record_ns` (on take).
     pub record_ns: f64,
     /// One copy of the sample by value.
@@ -93,6 +105,11 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
     });
     let mono_ns_ns = best_of(small, || {
         black_box(shoal_runtime::mono_ns());
+    });
+    // Warm the stamp clock up past its calibration span before timing it.
+    let (stamp_checked, stamp_off_ns) = stamp_agreement();
+    let stamp_ns_ns = best_of(small, || {
+        black_box(shoal_runtime::stamp_ns());
     });
     let mut rec = LatencyRecorder::new();
     let mut v = 1_000u64;
@@ -160,6 +177,9 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
         finite_direct_ns,
         fields_ns,
         mono_ns_ns,
+        stamp_ns_ns,
+        stamp_checked,
+        stamp_off_ns,
         record_ns,
         copy_ns,
         hop_raw_ns,
@@ -167,6 +187,27 @@ fn measure_typed<S: Sample + Payload, R: Payload + ZeroCopySend>(
         hop_shoal_ns,
         hop_shoal_fixed_ns,
     })
+}
+
+/// Stamps between exact reads for [`STAMP_CHECK_NS`], pausing now and
+/// then for longer than the stamp clock's window: how many, and the farthest
+/// one lay outside its bracket, ns.
+fn stamp_agreement() -> (u64, f64) {
+    let start = shoal_runtime::mono_ns();
+    let (mut n, mut off) = (0u64, 0u64);
+    while shoal_runtime::mono_ns() - start < STAMP_CHECK_NS {
+        n += 1;
+        if n.is_multiple_of(101) {
+            std::thread::sleep(std::time::Duration::from_micros(150));
+        }
+        let before = shoal_runtime::mono_ns();
+        let s = shoal_runtime::stamp_ns();
+        let after = shoal_runtime::mono_ns();
+        off = off
+            .max(before.saturating_sub(s))
+            .max(s.saturating_sub(after));
+    }
+    (n, off as f64)
 }
 
 /// One raw publish → receive hop, ns per hop; `limits` as shoal's ports set
@@ -286,7 +327,7 @@ fn replica_hop<S: Sample + Payload>(
             h.sim_time_ns = 0;
             h.origin_mono_ns = origin.mono_ns;
             h.origin_sim_time_ns = origin.sim_time_ns;
-            h.publish_mono_ns = shoal_runtime::mono_ns();
+            h.publish_mono_ns = shoal_runtime::stamp_ns();
             tx.send_copy(out).map_err(cause)?;
             seq += 1;
             // Subscriber::take_ready
@@ -294,7 +335,7 @@ fn replica_hop<S: Sample + Payload>(
                 let v: S = *r;
                 drop(r);
                 let h = *v.header();
-                latency.record_ns(shoal_runtime::mono_ns().saturating_sub(h.publish_mono_ns));
+                latency.record_ns(shoal_runtime::stamp_ns().saturating_sub(h.publish_mono_ns));
                 if let Some(n) = next_seq {
                     if h.seq > n {
                         lost += h.seq - n;

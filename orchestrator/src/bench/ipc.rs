@@ -755,18 +755,27 @@ fn print_costs(costs: &[Value]) {
         );
     }
     println!(
-        "{:>6}  {:>22} {:>12} {:>8} {:>7} {:>7}   (ns per call)",
-        "size", "is_finite (generated)", "plain loop", "mono_ns", "record", "copy"
+        "{:>6}  {:>22} {:>12} {:>8} {:>8} {:>7} {:>7}   (ns per call)",
+        "size", "is_finite (generated)", "plain loop", "mono_ns", "stamp_ns", "record", "copy"
     );
     for c in costs {
         println!(
-            "{:>6}  {:>22.0} {:>12.0} {:>8.0} {:>7.0} {:>7.0}",
+            "{:>6}  {:>22.0} {:>12.0} {:>8.0} {:>8.0} {:>7.0} {:>7.0}",
             size(c),
             f(c, "is_finite_ns"),
             f(c, "finite_direct_ns"),
             f(c, "mono_ns_ns"),
+            f(c, "stamp_ns_ns"),
             f(c, "record_ns"),
             f(c, "copy_ns"),
+        );
+    }
+    for c in costs {
+        println!(
+            "{:>6}  hop stamps (stamp_ns, the counter between exact reads): {:.0} stamps each between two CLOCK_MONOTONIC reads, the farthest {:.0} ns outside them",
+            size(c),
+            f(c, "stamp_checked"),
+            f(c, "stamp_off_ns"),
         );
     }
     for c in costs {

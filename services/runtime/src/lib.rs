@@ -40,6 +40,7 @@ pub mod domain;
 pub mod doorbell;
 pub mod latency;
 pub mod ports;
+pub mod stamp;
 pub mod stats;
 pub mod world;
 
@@ -57,6 +58,7 @@ pub use domain::{
 pub use doorbell::Doorbell;
 pub use latency::LatencyRecorder;
 pub use ports::{Publisher, Subscriber};
+pub use stamp::stamp_ns;
 pub use world::WorldView;
 
 /// How time advances in a run.

@@ -15,7 +15,7 @@ use ipc_types::{Header, Sample};
 
 use crate::domain::ChannelLimits;
 use crate::latency::LatencyRecorder;
-use crate::{mono_ns, service_name, Mode, RuntimeError, StepContext};
+use crate::{service_name, stamp_ns, Mode, RuntimeError, StepContext};
 
 /// What one process has taken on one input channel kind (every subscription
 /// of that kind merged): publish → take latency, losses, rejections.
@@ -88,7 +88,7 @@ impl Origin {
     /// A new sensor event: now, at this step's simulation time.
     pub fn here(ctx: &StepContext) -> Self {
         Self {
-            mono_ns: mono_ns(),
+            mono_ns: stamp_ns(),
             sim_time_ns: ctx.sim_time_ns,
         }
     }
@@ -274,9 +274,10 @@ impl<T: Sample, S: Service> Publisher<T, S> {
                 service: self.service.clone(),
             });
         }
-        // Read the clock before touching shared memory: the clock read
-        // waits for outstanding loads, and the loan's may miss the cache.
-        let publish_mono_ns = mono_ns();
+        // Read the clock before touching shared memory: an exact read (see
+        // `stamp`) waits for outstanding loads, and the loan's may miss the
+        // cache.
+        let publish_mono_ns = stamp_ns();
         // Written once into the loaned shared-memory chunk and stamped in
         // place: no intermediate copies of the payload.
         let loan = self
@@ -319,7 +320,7 @@ impl<T: Sample, S: Service> Publisher<T, S> {
                 service: self.service.clone(),
             });
         }
-        self.stamp(out.payload_mut().header_mut(), ctx, origin, mono_ns());
+        self.stamp(out.payload_mut().header_mut(), ctx, origin, stamp_ns());
         out.send().map_err(|e| self.send_error(e))?;
         self.sent()
     }
@@ -476,9 +477,9 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
             let Some(sample) = received else {
                 return Ok(());
             };
-            // The take time first: the clock read waits for outstanding
-            // loads, so it goes before the payload's cache misses.
-            let taken = mono_ns();
+            // The take time first: an exact read (see `stamp`) waits for
+            // outstanding loads, so it goes before the payload's cache misses.
+            let taken = stamp_ns();
             let publisher = sample.header().publisher_id().value();
             // One copy out of shared memory (a plain memcpy takes the cache
             // misses best); every check then reads the local copy.
@@ -635,7 +636,7 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
         let Some(sample) = received else {
             return Ok(None);
         };
-        let taken = mono_ns();
+        let taken = stamp_ns();
         let publisher = sample.header().publisher_id().value();
         let h = *sample.payload().header();
         let finite = sample.payload().is_finite();
