@@ -6,13 +6,20 @@
 //! orders the counter read behind every outstanding load (about 21 ns on the
 //! reference machine, two per hop); the counter alone costs about 9. So
 //! [`stamp_ns`] extrapolates from the last exact read with the counter, and
-//! reads the exact clock again once the last exact read is older than
-//! [`WINDOW_NS`]. The counter's rate is measured against the exact clock over
-//! the thread's whole life (from [`CALIBRATE_NS`] on; before that every stamp
-//! is an exact read), so the stamps of different processes agree with
-//! `CLOCK_MONOTONIC`, and so with each other, to within the rate error over
-//! one window: well under a nanosecond in steady state, and 50 ns if NTP
-//! slewed the clock by its largest rate (500 ppm) since the thread began.
+//! reads the exact clock again once the last one is older than its window.
+//!
+//! How far that is off: the counter's rate is measured against the exact
+//! clock over the thread's life so far (the span from its first exact read to
+//! its last), and each exact read's counter value is known to within half the
+//! few tens of ns that bracket it (a read bracketed by more than
+//! [`MAX_BRACKET_TICKS`] is not used). The window is 1/[`WINDOW_SHARE`] of
+//! that span, at most [`WINDOW_NS`], so the rate error over one window stays
+//! within 2/[`WINDOW_SHARE`] of the bracket (a few ns at worst, well under one
+//! typically), plus what NTP slewing changed in the clock's rate since the
+//! thread began (at most 500 ppm of [`WINDOW_NS`], 50 ns). The stamps of
+//! different processes therefore agree with `CLOCK_MONOTONIC`, and with each
+//! other, to that. Until the span reaches [`WINDOW_SHARE`] µs every stamp is
+//! an exact read.
 //!
 //! The counter is used only where the kernel itself keeps time with it
 //! (current clocksource `tsc`, which it picks only for an invariant,
@@ -26,9 +33,15 @@ use crate::mono_ns;
 /// Longest a stamp extrapolates from an exact read, ns.
 pub const WINDOW_NS: u64 = 100_000;
 
-/// Shortest span of exact reads the counter's rate is measured over before
-/// the counter is used, ns.
-pub const CALIBRATE_NS: u64 = 10_000_000;
+/// A stamp extrapolates at most this fraction of the span the counter's rate
+/// was measured over (1/64: the rate error then moves a stamp by at most
+/// 1/32 of an exact read's bracket).
+pub const WINDOW_SHARE: u64 = 64;
+
+/// Widest bracket of counter reads around an exact read that may anchor the
+/// counter (a read interrupted in between is not used), ticks: a few hundred
+/// ns at today's counter rates; an undisturbed read takes under a hundred.
+pub const MAX_BRACKET_TICKS: u64 = 1_000;
 
 /// One exact read and the counter around it, with the counter's rate.
 #[derive(Debug, Clone, Copy)]
@@ -90,13 +103,17 @@ pub fn stamp_ns() -> u64 {
     exact(tsc)
 }
 
-/// An exact read, taken as the new anchor; `before` is the counter just
-/// before it.
+/// An exact read, taken as the new anchor if the counter reads around it
+/// are close; `before` is the counter just before it.
 fn exact(before: u64) -> u64 {
     let ns = mono_ns();
     let after = counter();
+    let bracket = after.wrapping_sub(before);
+    if bracket > MAX_BRACKET_TICKS {
+        return ns;
+    }
     // The exact read happened between the two counter reads.
-    let tsc = before.wrapping_add(after.wrapping_sub(before) / 2);
+    let tsc = before.wrapping_add(bracket / 2);
     let mut a = ANCHOR.get().unwrap_or(Anchor {
         ns,
         tsc,
@@ -109,13 +126,14 @@ fn exact(before: u64) -> u64 {
     a.tsc = tsc;
     let span_ns = ns.saturating_sub(a.first_ns);
     let span_ticks = tsc.wrapping_sub(a.first_tsc);
-    if span_ns >= CALIBRATE_NS && span_ticks > 0 && span_ticks < u64::MAX / 2 {
+    let window_ns = (span_ns / WINDOW_SHARE).min(WINDOW_NS);
+    if window_ns >= 1_000 && span_ticks > 0 && span_ticks < u64::MAX / 2 {
         let scale = (u128::from(span_ns) << 32) / u128::from(span_ticks);
         a.scale = u64::try_from(scale).unwrap_or(0);
         a.window_ticks = if a.scale == 0 {
             0
         } else {
-            u64::try_from((u128::from(WINDOW_NS) << 32) / u128::from(a.scale)).unwrap_or(0)
+            u64::try_from((u128::from(window_ns) << 32) / u128::from(a.scale)).unwrap_or(0)
         };
     }
     ANCHOR.set(Some(a));
