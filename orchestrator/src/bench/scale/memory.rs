@@ -4,12 +4,19 @@
 use super::*;
 use crate::launch::os::{child_pids, kind_from_cmdline, parse_status, thread_cpu_s, MemReading};
 
-/// How often the memory sampler reads the run's processes. `VmHWM` is a
-/// peak the kernel keeps, so only `RssAnon` needs the sweeps, and it
-/// settles once a process has started: at N = 100 a sweep every 200 ms
-/// (2,500 `/proc` reads a second) took 4 % of the run's CPU under perf,
-/// taken from the run it measures.
-pub(crate) const MEM_SAMPLE_PERIOD: Duration = Duration::from_secs(1);
+/// How often the memory sampler reads a run of `processes` processes: 2 ms
+/// a process, from 20 ms to 1 s. `VmHWM` is a peak the kernel keeps, so
+/// only `RssAnon` needs the sweeps, and it settles once a process has
+/// started; but a process must be swept at least once while it lives. At
+/// N = 100 a sweep every 200 ms (2,500 `/proc` reads a second) took 4 % of
+/// the run's CPU under perf, taken from the run it measures; 1 s for every
+/// size saw 5 of N = 25's 126 processes, whose run lasts about a second. At
+/// 2 ms a process the sampler reads 500 files a second at any size.
+pub(crate) fn sample_period(processes: usize) -> Duration {
+    let per_process = Duration::from_millis(2);
+    (per_process * u32::try_from(processes).unwrap_or(u32::MAX))
+        .clamp(Duration::from_millis(20), Duration::from_secs(1))
+}
 
 /// The highest readings of every service process seen, by pid.
 #[derive(Debug, Default)]
@@ -62,7 +69,7 @@ impl MemPeaks {
     }
 }
 
-/// A thread that sweeps the run's processes every [`MEM_SAMPLE_PERIOD`]:
+/// A thread that sweeps the run's processes every [`sample_period`]:
 /// `VmHWM` is the peak of the process's own address space since its exec
 /// (the `ru_maxrss` that `wait4` reports also counts the orchestrator's
 /// memory that the child held between fork and exec).
@@ -72,7 +79,7 @@ pub(crate) struct MemSampler {
 }
 
 impl MemSampler {
-    pub(crate) fn start() -> anyhow::Result<Self> {
+    pub(crate) fn start(period: Duration) -> anyhow::Result<Self> {
         let stop = Arc::new(AtomicBool::new(false));
         let flag = Arc::clone(&stop);
         let handle = std::thread::Builder::new()
@@ -81,7 +88,7 @@ impl MemSampler {
                 let mut peaks = MemPeaks::default();
                 while !flag.load(Ordering::Relaxed) {
                     peaks.sweep();
-                    std::thread::park_timeout(MEM_SAMPLE_PERIOD);
+                    std::thread::park_timeout(period);
                 }
                 peaks.sampler_cpu_s = thread_cpu_s();
                 peaks
@@ -94,5 +101,20 @@ impl MemSampler {
         self.stop.store(true, Ordering::Relaxed);
         self.handle.thread().unpark();
         self.handle.join().unwrap_or_default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_sweep_period_grows_with_the_processes_within_its_bounds() {
+        assert_eq!(sample_period(0), Duration::from_millis(20));
+        assert_eq!(sample_period(5), Duration::from_millis(20));
+        // N = 25: 126 processes, a run of about a second, swept 4 times.
+        assert_eq!(sample_period(126), Duration::from_millis(252));
+        assert_eq!(sample_period(501), Duration::from_secs(1));
+        assert_eq!(sample_period(usize::MAX), Duration::from_secs(1));
     }
 }

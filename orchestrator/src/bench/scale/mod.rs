@@ -169,12 +169,22 @@ fn run_one(
     let opts = settings.options(scenario, dir);
     let peak_reset = reset_own_peak_rss();
     let cpu_before = sys::self_cpu_s();
-    let sampler = MemSampler::start()?;
+    let period = sample_period(scenario.processes().len());
+    let sampler = MemSampler::start(period)?;
     let t0 = Instant::now();
     let outcome = launch::run(&opts);
     let run_call_s = t0.elapsed().as_secs_f64();
     let peaks = sampler.finish();
     let outcome = outcome?;
+    let processes = scenario.processes().len();
+    if peaks.procs.len() < processes {
+        eprintln!(
+            "memory: only {} of {processes} processes were swept (every {} ms); \
+             the memory figures undercount",
+            peaks.procs.len(),
+            period.as_millis()
+        );
+    }
     let (mut rss, mut private) = peaks.by_kind();
     if let Some(own) = own_memory() {
         rss.insert("orchestrator".into(), own.hwm_kib);
@@ -189,7 +199,7 @@ fn run_one(
             peak_private_kib: private,
             processes_sampled: peaks.procs.len(),
             sweeps: peaks.sweeps,
-            period_s: MEM_SAMPLE_PERIOD.as_secs_f64(),
+            period_s: period.as_secs_f64(),
             sampler_cpu_s: peaks.sampler_cpu_s,
             orchestrator_peak_reset: peak_reset,
         },
