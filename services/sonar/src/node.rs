@@ -54,10 +54,13 @@ impl Task for SonarTask {
         let (Some(origin), Some(&pose)) = (origin, self.world.poses().get(self.index)) else {
             return Ok(());
         };
+        // The other hulls matter only if they echo.
         self.others.clear();
-        for (i, v) in self.world.poses().iter().enumerate() {
-            if i != self.index {
-                self.others.push(*v);
+        if self.sonar.config().hulls_echo {
+            for (i, v) in self.world.poses().iter().enumerate() {
+                if i != self.index {
+                    self.others.push(*v);
+                }
             }
         }
         let scan = self
