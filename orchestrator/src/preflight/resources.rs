@@ -105,11 +105,12 @@ pub fn needs(s: &Scenario) -> Needs {
     files += connections;
     let services = vehicle_channels + 5;
     // The domain's root: a static file per service; per process a node
-    // directory with its details and monitoring entries; the socket of
-    // `done`; a service tag and a port tag per port (every publisher,
-    // subscriber, notifier and listener; 214 of each measured).
+    // directory with its details and monitoring entries (the recorder has
+    // a second node, for reading stats); the socket of `done`; a service
+    // tag and a port tag per port (every publisher, subscriber, notifier
+    // and listener; 214 of each measured).
     let ports = connections + vehicle_channels + 2 * n_procs + 4;
-    files += 4 + services + 1 + 5 * (n_procs + 1) + 2 * ports;
+    files += 4 + services + 1 + 5 * (n_procs + 2) + 2 * ports;
     let recorder_services = vehicle_channels + 4;
     let orchestrator_services = 4;
     let world_services = vehicles as u64 + 4;

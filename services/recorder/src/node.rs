@@ -142,6 +142,17 @@ fn open_tap<T: Sample>(
     buffer: usize,
 ) -> anyhow::Result<Box<dyn Tap>> {
     let sub = rt.subscriber::<T>(service, limits, buffer)?;
+    tap_of(sub, writer, topic, limits, buffer)
+}
+
+/// The tap of a subscriber already open on `topic`.
+fn tap_of<T: Sample>(
+    sub: Subscriber<T>,
+    writer: &mut RecordingWriter,
+    topic: &str,
+    limits: &ChannelLimits,
+    buffer: usize,
+) -> anyhow::Result<Box<dyn Tap>> {
     // The depth the bag states is the buffer this subscriber really has.
     let channel = writer.add_channel_with_depth::<T>(topic, buffer.clamp(1, limits.max_buffer))?;
     Ok(Box::new(TypedTap { sub, channel }))
@@ -239,14 +250,15 @@ impl RecorderTask {
                 buffer.min(4),
             )?);
         }
-        taps.push(open_tap::<ipc_types::ProcessStats>(
-            rt,
-            &mut writer,
+        // Every process publishes stats and they stop together: this one
+        // subscriber keeps the connection of each until it is read.
+        let stats_limits = shoal_runtime::stats::stats_limits(rt.args().processes);
+        let stats = rt.subscriber_of_many::<ipc_types::ProcessStats>(
             &ipc_types::run_service_name(&run, RunChannel::Stats),
-            "/stats",
-            &shoal_runtime::stats::stats_limits(rt.args().processes),
+            &stats_limits,
             4,
-        )?);
+        )?;
+        taps.push(tap_of(stats, &mut writer, "/stats", &stats_limits, 4)?);
         taps.push(open_tap::<ipc_types::Event>(
             rt,
             &mut writer,

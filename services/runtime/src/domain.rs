@@ -34,7 +34,31 @@ pub fn domain_prefix(run_id: &str) -> String {
     format!("shoal_{run_id}_")
 }
 
-/// The iceoryx2 configuration of a run's domain.
+/// Expired connections each subscriber keeps (iceoryx2's
+/// `subscriber_expired_connection_buffer`): connections of publishers that
+/// left while the subscriber still had samples of theirs queued or
+/// borrowed, kept until those are read or returned.
+///
+/// iceoryx2 keeps 128 by default, and every subscriber builds the slot map
+/// for them (and for its live connections) when it is created, written
+/// whole: about 3.6 KB a slot, 464 KiB a subscriber. That was two thirds
+/// of a run's private memory (`shoal bench scale`: 389 MiB at N = 25,
+/// 1,583 MiB at N = 100) and most of the start-up's page zeroing. A shoal
+/// subscriber reads its queue at every step, and every service has at most
+/// two publishers (a process and its restarted successor) except `stats`,
+/// whose reader asks for more ([`iceoryx_config_keeping`]); four is that
+/// with room to spare.
+pub const EXPIRED_CONNECTIONS: usize = 4;
+
+/// The iceoryx2 configuration of a run's domain: [`iceoryx_config_keeping`]
+/// with [`EXPIRED_CONNECTIONS`].
+pub fn iceoryx_config(run_id: &str) -> Config {
+    iceoryx_config_keeping(run_id, EXPIRED_CONNECTIONS)
+}
+
+/// The iceoryx2 configuration of a run's domain, whose subscribers keep up
+/// to `expired_connections` connections of publishers that left (see
+/// [`EXPIRED_CONNECTIONS`]).
 ///
 /// iceoryx2 by default looks for dead nodes whenever a node is created or
 /// dropped and whenever a service is opened. Each look lists every node of
@@ -44,8 +68,12 @@ pub fn domain_prefix(run_id: &str) -> String {
 /// owns every process, reaps each one with `wait4`, and calls
 /// `try_cleanup_dead_nodes` itself when one dies (the restart policy), and
 /// whatever a crashed run leaves is removed by the stale-domain sweep.
-pub fn iceoryx_config(run_id: &str) -> Config {
+pub fn iceoryx_config_keeping(run_id: &str, expired_connections: usize) -> Config {
     let mut config = Config::default();
+    config
+        .defaults
+        .publish_subscribe
+        .subscriber_expired_connection_buffer = expired_connections;
     config.global.node.cleanup_dead_nodes_on_creation = false;
     config.global.node.cleanup_dead_nodes_on_destruction = false;
     config.global.service.cleanup_dead_nodes_on_open = false;

@@ -453,6 +453,26 @@ impl<S: Service> Runtime<S> {
         Subscriber::open(&self.node, service, limits, buffer, self.args.mode)
     }
 
+    /// A subscriber of a service that many processes publish on (the run's
+    /// `stats`: every process). It is opened on a node of its own whose
+    /// subscribers keep an expired connection for every publisher the
+    /// service may have (see [`domain::EXPIRED_CONNECTIONS`]), so that when
+    /// the processes stop together none of their last samples is dropped
+    /// unread. That node lives as long as the subscriber.
+    pub fn subscriber_of_many<T: ipc_types::Sample>(
+        &self,
+        service: &str,
+        limits: &ChannelLimits,
+        buffer: usize,
+    ) -> Result<Subscriber<T, S>, RuntimeError> {
+        let config = domain::iceoryx_config_keeping(&self.args.run_id, limits.max_publishers);
+        let node = node_with_config::<S>(
+            &config,
+            &format!("{}/{}", self.args.vehicle, self.args.process),
+        )?;
+        Subscriber::open(&node, service, limits, buffer, self.args.mode)
+    }
+
     /// Runs `task` until SIGINT/SIGTERM, in the mode of the run.
     ///
     /// Either way the process's statistics are published on the run's
@@ -1086,14 +1106,18 @@ pub fn domain_node(run_id: &str, name: &str) -> Result<Node<ipc::Service>, Runti
 
 /// [`domain_node`] over any iceoryx2 service kind.
 pub fn domain_node_of<S: Service>(run_id: &str, name: &str) -> Result<Node<S>, RuntimeError> {
-    let config = iceoryx_config(run_id);
+    node_with_config(&iceoryx_config(run_id), name)
+}
+
+/// A node named `name` with the iceoryx2 configuration `config`.
+fn node_with_config<S: Service>(config: &Config, name: &str) -> Result<Node<S>, RuntimeError> {
     let node_name = NodeName::new(name).map_err(|e| RuntimeError::Node {
         name: name.to_string(),
         source: Box::new(e),
     })?;
     NodeBuilder::new()
         .name(&node_name)
-        .config(&config)
+        .config(config)
         .signal_handling_mode(SignalHandlingMode::HandleTerminationRequests)
         .create::<S>()
         .map_err(|e| RuntimeError::Node {

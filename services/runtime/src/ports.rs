@@ -834,4 +834,60 @@ mod tests {
         assert_eq!(sub.lost(), 0);
         assert_eq!(sub.latency().count, 4);
     }
+
+    /// Connects the subscriber to the publishers that appeared, without
+    /// reading anything.
+    fn connect(sub: &Subscriber<Nav>) {
+        use iceoryx2::port::update_connections::UpdateConnections;
+        sub.inner.update_connections().unwrap();
+    }
+
+    #[test]
+    fn the_last_samples_of_publishers_that_left_are_still_read() {
+        let run = format!("expired{}", std::process::id());
+        let _domain = Domain(run.clone());
+        let read = |sub: &mut Subscriber<Nav>| {
+            let mut got = Vec::new();
+            sub.take_all(|v| got.push(v.depth_m)).unwrap();
+            got
+        };
+
+        // A per-vehicle channel: a process, its restarted successor and
+        // the next, each gone with a sample unread.
+        let node = crate::domain_node(&run, "expired-test").unwrap();
+        let service = format!("shoal/{run}/V/nav");
+        let limits = ChannelLimits::vehicle();
+        let mut sub =
+            Subscriber::<Nav>::open(&node, &service, &limits, 16, Mode::Realtime).unwrap();
+        for marker in [1.0, 2.0, 3.0] {
+            let mut p = crate::node_publisher::<Nav, _>(&node, &service, &limits).unwrap();
+            connect(&sub);
+            p.publish(nav(marker), &ctx(0), Origin::default()).unwrap();
+        }
+        assert_eq!(read(&mut sub), vec![1.0, 2.0, 3.0]);
+
+        // A channel every process publishes on (stats), read on a node
+        // that keeps a connection for each: twice the default's worth of
+        // publishers stop together, and none of their samples is lost.
+        let many = 2 * crate::domain::EXPIRED_CONNECTIONS;
+        let limits = crate::stats::stats_limits(many);
+        let service = format!("shoal/{run}/stats");
+        let wide = crate::node_with_config::<ipc::Service>(
+            &crate::domain::iceoryx_config_keeping(&run, limits.max_publishers),
+            "expired-test-wide",
+        )
+        .unwrap();
+        let mut sub = Subscriber::<Nav>::open(&wide, &service, &limits, 4, Mode::Realtime).unwrap();
+        let mut publishers: Vec<_> = (0..many)
+            .map(|_| crate::node_publisher::<Nav, _>(&node, &service, &limits).unwrap())
+            .collect();
+        connect(&sub);
+        for (i, p) in publishers.iter_mut().enumerate() {
+            p.publish(nav(i as f64), &ctx(0), Origin::default())
+                .unwrap();
+        }
+        drop(publishers);
+        let got = read(&mut sub);
+        assert_eq!(got.len(), many, "{got:?}");
+    }
 }

@@ -100,12 +100,14 @@ pub fn read_stats_files(run_id: &str) -> Vec<StatsFile> {
 }
 
 /// Limits of the run's `stats` channel: every process publishes, the
-/// recorder (and outside clients) read.
+/// recorder (and outside clients) read. The recorder opens it on two nodes:
+/// its own, to publish, and the one it reads on
+/// ([`crate::Runtime::subscriber_of_many`]).
 pub fn stats_limits(processes: usize) -> ChannelLimits {
     ChannelLimits {
         max_publishers: processes + 2,
         max_subscribers: 1 + domain::SPARE_SUBSCRIBERS,
-        max_nodes: processes + 2 + domain::SPARE_SUBSCRIBERS,
+        max_nodes: processes + 3 + domain::SPARE_SUBSCRIBERS,
         max_buffer: 4,
         history: 0,
     }
