@@ -5,7 +5,11 @@
 //! `#[repr(C)]` words, no shoal header); the shoal cases use
 //! [`BenchPing256`] / [`BenchPing4K`] from `ipc-types`, which start with
 //! shoal's common header and go through the real `Sample` trait. Each pair
-//! has the same total size.
+//! has the same total size, and both are filled and checked by the same two
+//! functions over their payload as 64-bit words (a shoal payload's floats
+//! by their bits), so the pinger and ponger of a shoal case do the same
+//! work on the payload as a raw case's, and the ratio of the two is the
+//! ports' alone.
 
 use iceoryx2::prelude::ZeroCopySend;
 use ipc_types::bench::{BenchPing1M, BenchPing256, BenchPing256K, BenchPing4K};
@@ -42,14 +46,41 @@ pub trait Payload: bytemuck::Pod + Send + std::fmt::Debug + 'static {
 /// Words written and checked in a large payload, spread evenly over it.
 pub const SPOT_WORDS: usize = 8;
 
-/// Word `i` of the raw payload of `round`.
-fn raw_word(round: u64, i: usize) -> u64 {
-    round ^ (i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+/// The multiplier that spreads a word's index over its bits.
+const SPREAD: u64 = 0x9E37_79B9_7F4A_7C15;
+
+/// Word `i` of the payload of `round`, raw or shoal, from `spread`, which
+/// is `(i + 1) * SPREAD` (kept by the loops as a running sum). Bit 62 is
+/// clear, so read as a float its exponent is below the all-ones of
+/// infinity and NaN: a shoal payload's floats are finite, as a service's
+/// sample must be.
+fn word(round: u64, spread: u64) -> u64 {
+    (round ^ spread) & !(1 << 62)
 }
 
-/// Element `i` of the shoal payload of `round` (always finite).
-fn shoal_value(round: u64, i: usize) -> f64 {
-    (round % (1 << 40)) as f64 + i as f64 * 0.25
+/// Writes every `STRIDE`-th word of a payload for `round`. Raw and shoal
+/// payloads are filled and checked by these same two functions, over their
+/// words as `u64` (one copy of the machine code for both): a shoal case
+/// differs from its raw peer by the ports alone.
+#[inline(never)]
+fn fill_words<const STRIDE: usize>(words: &mut [u64], round: u64) {
+    let mut spread = SPREAD;
+    for w in words.iter_mut().step_by(STRIDE) {
+        *w = word(round, spread);
+        spread = spread.wrapping_add(SPREAD.wrapping_mul(STRIDE as u64));
+    }
+}
+
+/// True when every `STRIDE`-th word is the one [`fill_words`] writes for `round`.
+#[inline(never)]
+fn check_words<const STRIDE: usize>(words: &[u64], round: u64) -> bool {
+    let mut spread = SPREAD;
+    let mut diff = 0;
+    for &w in words.iter().step_by(STRIDE) {
+        diff |= w ^ word(round, spread);
+        spread = spread.wrapping_add(SPREAD.wrapping_mul(STRIDE as u64));
+    }
+    diff == 0
 }
 
 macro_rules! raw_payload {
@@ -70,16 +101,13 @@ macro_rules! raw_payload {
             const SIZE: usize = $size;
             fn fill(&mut self, round: u64) {
                 self.round = round;
-                for i in (0..$words).step_by($stride) {
-                    self.words[i] = raw_word(round, i);
-                }
+                fill_words::<{ $stride }>(&mut self.words, round);
             }
             fn round(&self) -> u64 {
                 self.round
             }
             fn check(&self, round: u64) -> bool {
-                self.round == round
-                    && (0..$words).step_by($stride).all(|i| self.words[i] == raw_word(round, i))
+                self.round == round && check_words::<{ $stride }>(&self.words, round)
             }
         }
     };
@@ -119,24 +147,19 @@ raw_payload!(
 );
 
 macro_rules! shoal_payload {
-    ($name:ident, $size:expr, $stride:expr, $value:expr, $finite:expr) => {
+    ($name:ident, $size:expr, $stride:expr, $finite:expr) => {
         impl Payload for $name {
             const SIZE: usize = $size;
             fn fill(&mut self, round: u64) {
                 self.round = round;
-                let n = self.payload.len();
-                for i in (0..n).step_by($stride) {
-                    self.payload[i] = $value(round, i);
-                }
+                fill_words::<{ $stride }>(bytemuck::cast_slice_mut(&mut self.payload), round);
             }
             fn round(&self) -> u64 {
                 self.round
             }
             fn check(&self, round: u64) -> bool {
                 self.round == round
-                    && (0..self.payload.len())
-                        .step_by($stride)
-                        .all(|i| self.payload[i] == $value(round, i))
+                    && check_words::<{ $stride }>(bytemuck::cast_slice(&self.payload), round)
             }
             fn payload_is_finite(&self) -> bool {
                 // The header holds integers only; `round` too.
@@ -154,20 +177,18 @@ fn integers(_: &[u64]) -> bool {
     true
 }
 
-shoal_payload!(BenchPing256, 256, 1, shoal_value, all_finite);
-shoal_payload!(BenchPing4K, 4096, 1, shoal_value, all_finite);
+shoal_payload!(BenchPing256, 256, 1, all_finite);
+shoal_payload!(BenchPing4K, 4096, 1, all_finite);
 shoal_payload!(
     BenchPing256K,
     256 * 1024,
     (256 * 1024 - 48) / 8 / SPOT_WORDS,
-    raw_word,
     integers
 );
 shoal_payload!(
     BenchPing1M,
     1024 * 1024,
     (1024 * 1024 - 48) / 8 / SPOT_WORDS,
-    raw_word,
     integers
 );
 
