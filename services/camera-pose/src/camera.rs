@@ -25,6 +25,50 @@ impl Capsule {
     }
 }
 
+/// Where a hull can hide one of the parent's beacons from the camera: within
+/// `beacon reach + hull reach` of the segment from the camera centre to the
+/// parent's body origin. Every sight line from the camera to a beacon lies
+/// within the beacons' reach of that segment, so a hull whose body origin is
+/// farther from it than the sum cannot block one; a camera tests only the
+/// hulls inside ([`OcclusionZone::may_hide`]), which keeps its step
+/// independent of the group's size without changing what it sees.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OcclusionZone {
+    camera: Point3<f64>,
+    parent: Point3<f64>,
+    reach_sq: f64,
+}
+
+/// Added to the zone's reach so that rounding never drops a hull that
+/// touches a sight line, m.
+const ZONE_SLACK_M: f64 = 1e-6;
+
+impl OcclusionZone {
+    /// The zone of a camera centred at `camera` (world) looking at beacons
+    /// within `beacon_reach_m` of `parent` (the parent's body origin, world),
+    /// for hulls within `hull_reach_m` of their own body origin
+    /// ([`crate::BeaconLayout::reach_m`], [`crate::HullConfig::reach_m`]).
+    pub fn new(
+        camera: Point3<f64>,
+        parent: Point3<f64>,
+        beacon_reach_m: f64,
+        hull_reach_m: f64,
+    ) -> Self {
+        let reach = beacon_reach_m + hull_reach_m + ZONE_SLACK_M;
+        Self {
+            camera,
+            parent,
+            reach_sq: reach * reach,
+        }
+    }
+
+    /// False only if a hull whose body origin is at `origin` (world) cannot
+    /// block any sight line from the camera to a beacon.
+    pub fn may_hide(&self, origin: &Point3<f64>) -> bool {
+        segment_distance_sq(origin, origin, &self.camera, &self.parent) <= self.reach_sq
+    }
+}
+
 /// Squared distance between segments `p1`–`q1` and `p2`–`q2` (Ericson,
 /// *Real-Time Collision Detection*, §5.1.9), degenerate segments included.
 pub fn segment_distance_sq(

@@ -323,6 +323,11 @@ impl BeaconLayout {
             .map(|p| Point3::from(*p))
     }
 
+    /// Farthest any beacon lies from the parent's body origin, m.
+    pub fn reach_m(&self) -> f64 {
+        self.points().map(|p| p.coords.norm()).fold(0.0, f64::max)
+    }
+
     fn points_vec(&self) -> Vec<Point3<f64>> {
         self.points().collect()
     }
@@ -415,6 +420,11 @@ impl HullConfig {
             ));
         }
         Ok(())
+    }
+
+    /// Farthest any point of the hull lies from the body origin, m.
+    pub fn reach_m(&self) -> f64 {
+        (0.5 * self.length_m).max(self.radius_m)
     }
 
     /// The hull in world NED for a vehicle at `pose` (body → NED): the axis

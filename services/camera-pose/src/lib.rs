@@ -58,7 +58,9 @@ mod pnp;
 mod poly;
 
 pub mod acoustic;
-pub use camera::{segment_distance_sq, BeaconObservation, BeaconStatus, Camera, Capsule};
+pub use camera::{
+    segment_distance_sq, BeaconObservation, BeaconStatus, Camera, Capsule, OcclusionZone,
+};
 pub use config::{BeaconLayout, CameraConfig, CameraError, HullConfig, PoseConfig};
 pub use detect::{
     Blob, DetectConfig, Detector, Identification, Identifier, NoMatch, Prior, RUNNERS_UP,

@@ -23,12 +23,12 @@ use nalgebra::Matrix6;
 
 use camera_pose::acoustic::{AcousticConfig, Modem};
 use camera_pose::{
-    BeaconLayout, BeaconObservation, Camera, CameraConfig, Capsule, HullConfig, PoseConfig,
-    PoseEstimator,
+    BeaconLayout, BeaconObservation, Camera, CameraConfig, Capsule, HullConfig, OcclusionZone,
+    PoseConfig, PoseEstimator,
 };
 use camera_pose::{DetectConfig, Detector, Identifier, NoMatch, Prior};
 use ipc_types::{Beacons, Channel, Image, LeaderPose, Sample};
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Point3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use shoal_runtime::convert::{arr, seed_for, wxyz};
@@ -168,9 +168,19 @@ impl CameraTask {
         let poses = self.world.as_ref().map_or(&[][..], WorldView::poses);
         let me = poses[self.index];
         let parent = poses[self.parent];
+        // Only the hulls that can come between the camera and a beacon.
+        let zone = OcclusionZone::new(
+            Point3::from(self.camera.camera_in_world(&me).translation.vector),
+            Point3::from(parent.translation.vector),
+            self.layout.reach_m(),
+            self.hull.reach_m(),
+        );
         self.occluders.clear();
         for (i, v) in poses.iter().enumerate() {
-            if i != self.index && i != self.parent {
+            if i != self.index
+                && i != self.parent
+                && zone.may_hide(&Point3::from(v.translation.vector))
+            {
                 self.occluders.push(self.hull.capsule(v));
             }
         }

@@ -331,3 +331,50 @@ fn beacons_seen_from_outside_their_emission_cone_are_not_seen() {
     let obs = camera.observe(&Isometry3::identity(), &facing_us, &omni, &[], &mut rng());
     assert_eq!(obs.visible_count(), 4);
 }
+
+proptest::proptest! {
+    /// A camera that tests only the hulls in its occlusion zone sees exactly
+    /// what it sees when it tests every hull of the group.
+    #[test]
+    fn the_occlusion_zone_keeps_every_hull_that_hides_a_beacon(
+        ahead in 2.0f64..14.0,
+        side in -3.0f64..3.0,
+        others in proptest::collection::vec((0.0f64..18.0, -5.0f64..5.0, -2.0f64..2.0, -3.2f64..3.2), 1..24),
+    ) {
+        let camera = Camera::new(&CameraConfig::default()).unwrap();
+        let layout = BeaconLayout::default();
+        let hull = HullConfig::default();
+        let me = Isometry3::identity();
+        let parent = Isometry3::translation(1.4 + ahead, side, 0.0);
+        let poses: Vec<Isometry3<f64>> = others
+            .iter()
+            .map(|&(x, y, z, yaw)| {
+                Isometry3::from_parts(
+                    Translation3::new(x, y, z),
+                    UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+                )
+            })
+            .collect();
+        let zone = OcclusionZone::new(
+            Point3::from(camera.camera_in_world(&me).translation.vector),
+            Point3::from(parent.translation.vector),
+            layout.reach_m(),
+            hull.reach_m(),
+        );
+        let all: Vec<Capsule> = poses.iter().map(|p| hull.capsule(p)).collect();
+        let kept: Vec<Capsule> = poses
+            .iter()
+            .filter(|p| zone.may_hide(&Point3::from(p.translation.vector)))
+            .map(|p| hull.capsule(p))
+            .collect();
+        let full = camera.observe(&me, &parent, &layout, &all, &mut rng());
+        let culled = camera.observe(&me, &parent, &layout, &kept, &mut rng());
+        proptest::prop_assert_eq!(full.visible, culled.visible);
+        proptest::prop_assert_eq!(full.pixels, culled.pixels);
+        // Each dropped hull hides nothing on its own either.
+        for p in poses.iter().filter(|p| !zone.may_hide(&Point3::from(p.translation.vector))) {
+            let alone = camera.observe(&me, &parent, &layout, &[hull.capsule(p)], &mut rng());
+            proptest::prop_assert_eq!(alone.visible_count(), camera.observe(&me, &parent, &layout, &[], &mut rng()).visible_count());
+        }
+    }
+}
