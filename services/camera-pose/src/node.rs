@@ -85,6 +85,9 @@ pub struct CameraTask {
     beacons_out: Publisher<Beacons>,
     pose_out: Publisher<LeaderPose>,
     occluders: Vec<Capsule>,
+    /// The beacons' reach from the parent's body origin, m (for the
+    /// occlusion zone; constant, so computed once).
+    beacon_reach_m: f64,
     faults: CameraFaults,
 }
 
@@ -136,6 +139,7 @@ impl CameraTask {
                 Source::Acoustic(Modem::new(&cfg, first).map_err(anyhow::Error::msg)?)
             }
         };
+        let beacon_reach_m = layout.reach_m();
         Ok(Self {
             source,
             camera: Camera::new(&cam_cfg)?,
@@ -159,6 +163,7 @@ impl CameraTask {
             beacons_out: rt.publisher(&ipc_types::service_name(run, me, Channel::Beacons), &lim)?,
             pose_out: rt.publisher(&ipc_types::service_name(run, me, Channel::LeaderPose), &lim)?,
             occluders: Vec::with_capacity(scenario.vehicles.len()),
+            beacon_reach_m,
             faults: CameraFaults::new(&scenario.faults, me),
         })
     }
@@ -172,7 +177,7 @@ impl CameraTask {
         let zone = OcclusionZone::new(
             Point3::from(self.camera.camera_in_world(&me).translation.vector),
             Point3::from(parent.translation.vector),
-            self.layout.reach_m(),
+            self.beacon_reach_m,
             self.hull.reach_m(),
         );
         self.occluders.clear();
