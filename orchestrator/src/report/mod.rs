@@ -366,7 +366,11 @@ const PLAYER: &str = r#"
     slider.value = i;
     drawn += 1; body.dataset.frames = drawn;
   }
-  function tick(now) {
+  // Timers, not requestAnimationFrame, drive the animation: a page that is
+  // hidden or headless (a browser under a virtual clock) may never be given
+  // an animation frame, while timers run everywhere at a steady rate.
+  function tick() {
+    const now = performance.now();
     if (playing && last !== null) {
       const dt = (now - last) / 1000 * Number(speed.value);
       frame = Math.min(D.t.length - 1, frame + dt * (D.t.length > 1 ? 1 / (D.t[1] - D.t[0]) : 0));
@@ -374,14 +378,14 @@ const PLAYER: &str = r#"
       draw(Math.floor(frame));
     }
     last = now;
-    requestAnimationFrame(tick);
+    setTimeout(tick, 1000 / 30);
   }
   button.addEventListener('click', () => { playing = !playing; if (playing && frame >= D.t.length - 1) frame = 0; button.textContent = playing ? 'pause' : 'play'; });
   slider.addEventListener('input', () => { frame = Number(slider.value); draw(frame); });
   view.addEventListener('change', () => draw(Math.floor(frame)));
   draw(0);
   body.dataset.ready = '1';
-  requestAnimationFrame(tick);
+  setTimeout(tick, 1000 / 30);
 })();
 "#;
 
