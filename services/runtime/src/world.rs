@@ -46,8 +46,7 @@ impl WorldView {
         let poses = &mut self.poses;
         let fresh = self.sub.with_latest_in_place(ctx, |w| {
             poses.clear();
-            let n = (w.count as usize).min(w.vehicles.len());
-            poses.extend(w.vehicles[..n].iter().map(world_pose));
+            poses.extend(w.poses().iter().map(world_pose));
             Origin::of(&w.header)
         })?;
         if fresh.is_some() {
