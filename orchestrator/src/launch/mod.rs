@@ -39,7 +39,7 @@ pub struct RunOptions {
     /// Longest a lockstep tick may take before the run is declared hung, s.
     pub tick_timeout: Duration,
     /// Adaptive wait budget of every process (and of the orchestrator's wait
-    /// for `done`), µs; 0 = block at once.
+    /// for a tick's end), µs; 0 = block at once.
     pub spin_us: u64,
     /// Spread the run over these hosts (`shoal run --hosts`); `None`: here.
     pub hosts: Option<crate::hosts::HostsFile>,
@@ -683,7 +683,7 @@ fn check_signal(r: WaitSetRunResult) -> Result<(), RunError> {
     }
 }
 
-/// What [`wait_done`] has heard on `done`.
+/// What [`wait_done`] has heard: finished steps and ready reports.
 struct Tally {
     n: usize,
     pending: Vec<bool>,
@@ -692,13 +692,11 @@ struct Tally {
 }
 
 impl Tally {
-    /// Done ids are process indices (the last of a tick to finish; the
-    /// others are read from the doorbell); ready ids follow them.
+    /// An event on `done`: ready ids follow the process indices (finished
+    /// steps are read from the doorbell, whose done counter wakes the wait).
     fn on(&mut self, id: usize) {
-        if id < self.n {
-            self.settle(id);
-        } else if id < 2 * self.n {
-            self.ready.push(id - self.n);
+        if let Some(i) = id.checked_sub(self.n).filter(|i| *i < self.n) {
+            self.ready.push(i);
         }
     }
 
@@ -785,7 +783,7 @@ pub(crate) fn wait_ready(
     wait_done(ports, sup, procs, &[], timeout, 0.0, Duration::ZERO)
 }
 
-/// Waits until every process in `expected` has notified `done` for the tick
+/// Waits until every process in `expected` has finished its step of the tick
 /// at `sim_time_s`, and every restarted process has reported ready.
 ///
 /// A process that dies meanwhile is handled by the run's policy: with
@@ -845,14 +843,24 @@ pub(crate) fn wait_done(
         if t.remaining == 0 && !ports.recovery.any_awaiting() {
             break;
         }
-        // poll(2) on the listener's socket, then a non-blocking take: three
-        // system calls where iceoryx2's timed_wait makes seven (it toggles
-        // the socket's blocking mode and its timeout on every call).
-        let readable = sys::wait_readable(ports.done_fd, slice).context("waiting for done")?;
-        ports
-            .done
-            .try_wait(|ev| t.on(ev.id.as_value()))
-            .context("taking done")?;
+        let woken = if ports.recovery.any_awaiting() {
+            // A restarted process says it is ready on `done`: poll(2) on the
+            // listener's socket, then a non-blocking take (three system
+            // calls where iceoryx2's timed_wait makes seven: it toggles the
+            // socket's blocking mode and its timeout on every call).
+            let readable = sys::wait_readable(ports.done_fd, slice).context("waiting for ready")?;
+            ports
+                .done
+                .try_wait(|ev| t.on(ev.id.as_value()))
+                .context("taking ready")?;
+            readable
+        } else {
+            // Finished steps: done's counter is read before the slots, so a
+            // notification after the reading ends the futex wait at once.
+            let seen = ports.bell.done_seq();
+            t.read(&ports.bell, expected);
+            t.remaining == 0 || ports.bell.wait_done(seen, slice)
+        };
         t.read(&ports.bell, expected);
         if t.remaining == 0 && t.ready.is_empty() && !ports.recovery.any_awaiting() {
             break;
@@ -860,10 +868,10 @@ pub(crate) fn wait_done(
         if let Some(sig) = termination_requested() {
             return Err(RunError::Interrupted(sig).into());
         }
-        // A process that died sends no done: the wait runs out (or SIGCHLD
-        // cuts it short) before a death matters, so reap only then, not
-        // after every done.
-        let deaths = if readable {
+        // A process that died sends no done: the wait runs out (or a
+        // signal cuts it short) before a death matters, so reap only then,
+        // not after every done.
+        let deaths = if woken {
             sup.send_due_signals();
             Vec::new()
         } else {

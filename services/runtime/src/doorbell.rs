@@ -9,12 +9,19 @@
 //! and calling `FUTEX_WAKE` on it; the process sleeps in `FUTEX_WAIT` until
 //! the counter differs from the value it last stepped on.
 //!
-//! A last slot counts the processes of the tick still stepping: the
+//! A further slot counts the processes of the tick still stepping: the
 //! orchestrator sets it before it rings them, each process decrements it
 //! when it has finished, and only the one that brings it to zero notifies
-//! `done` (an iceoryx2 event, as every sample and every other event).
-//! Which processes have finished is read from their slots, so a count that
-//! a death left too high costs a wait's slice, never a wrong answer.
+//! done. Which processes have finished is read from their slots, so a count
+//! that a death left too high costs a wait's slice, never a wrong answer.
+//!
+//! The last slot is done's own counter, the other way round: a process
+//! that notifies done increments it and calls `FUTEX_WAKE`, and the
+//! orchestrator, having read it before it read the processes' slots, sleeps
+//! in `FUTEX_WAIT` until it differs. It replaced the iceoryx2 event `done`
+//! for finished steps (a `sendto` for the process, a `ppoll` and a
+//! `recvfrom` for the orchestrator); that event still carries what is rare,
+//! a restarted process's "ready".
 //!
 //! A ring also carries the tick it is for, and whether the tick's count
 //! includes the step. A step it does not include is one the orchestrator
@@ -43,6 +50,10 @@ use iceoryx2_bb_posix::creation_mode::CreationMode;
 use iceoryx2_bb_posix::shared_memory::{SharedMemory, SharedMemoryBuilder};
 
 use crate::domain::domain_prefix;
+
+/// Slots past the processes': the tick's count of processes stepping and
+/// done's counter.
+const EXTRA_SLOTS: usize = 2;
 
 /// One process's slot, alone on its cache line (the orchestrator writes
 /// one while another process reads its own).
@@ -126,7 +137,7 @@ impl Doorbell {
         let (name, file) = file_name(run_id)?;
         let shm = SharedMemoryBuilder::new(&file)
             .creation_mode(CreationMode::CreateExclusive)
-            .size((processes + 1) * std::mem::size_of::<Slot>())
+            .size((processes + EXTRA_SLOTS) * std::mem::size_of::<Slot>())
             .create()
             .map_err(|source| DoorbellError::Map { name, source })?;
         Ok(Self {
@@ -145,7 +156,7 @@ impl Doorbell {
                 name: name.clone(),
                 source,
             })?;
-        let found = (shm.size() / std::mem::size_of::<Slot>()).saturating_sub(1);
+        let found = (shm.size() / std::mem::size_of::<Slot>()).saturating_sub(EXTRA_SLOTS);
         if found < processes {
             return Err(DoorbellError::Size {
                 name,
@@ -159,10 +170,11 @@ impl Doorbell {
         })
     }
 
-    /// Slot `i`; slot `slots` is the tick's count of processes stepping.
+    /// Slot `i`; slot `slots` is the tick's count of processes stepping,
+    /// slot `slots + 1` done's counter.
     fn slot(&self, i: usize) -> &Slot {
-        assert!(i <= self.slots, "slot {i} of {}", self.slots);
-        // SAFETY: the mapping is page aligned and holds `slots + 1` `Slot`s
+        assert!(i < self.slots + EXTRA_SLOTS, "slot {i} of {}", self.slots);
+        // SAFETY: the mapping is page aligned and holds `slots + EXTRA_SLOTS` `Slot`s
         // (checked at open); a `Slot` is two `AtomicU32`s padded to 64 bytes,
         // valid for any bit pattern, and every access to it, here and in
         // other processes, is atomic. The reference lives no longer than
@@ -183,6 +195,38 @@ impl Doorbell {
         &self.slot(self.slots).seq
     }
 
+    /// Done's counter: finished steps notified so far.
+    fn done_counter(&self) -> &AtomicU32 {
+        &self.slot(self.slots + 1).seq
+    }
+
+    /// Done's counter now: read it before reading which processes have
+    /// finished, and [`Doorbell::wait_done`] on it, so that no notification
+    /// in between is lost.
+    pub fn done_seq(&self) -> u32 {
+        self.done_counter().load(Ordering::Acquire)
+    }
+
+    /// Notifies done (a process whose [`Doorbell::finished`] said so): wakes
+    /// the one waiter, the orchestrator.
+    pub fn notify_done(&self) {
+        let c = self.done_counter();
+        c.fetch_add(1, Ordering::Release);
+        futex(c, libc::FUTEX_WAKE, 1, None);
+    }
+
+    /// Sleeps until done's counter differs from `seen`, at most `timeout`;
+    /// true when it does (false when the wait ran out or a signal cut it
+    /// short).
+    pub fn wait_done(&self, seen: u32, timeout: Duration) -> bool {
+        let c = self.done_counter();
+        if c.load(Ordering::Acquire) != seen {
+            return true;
+        }
+        futex(c, libc::FUTEX_WAIT, seen, Some(timeout));
+        c.load(Ordering::Acquire) != seen
+    }
+
     /// Sets the count of processes due at the tick about to be rung (the
     /// orchestrator, before it rings them).
     pub fn arm(&self, due: usize) {
@@ -191,8 +235,8 @@ impl Doorbell {
     }
 
     /// Process `i` has finished the step of wake-up `seq`; true when it
-    /// must notify `done`: it was the last of its tick to finish, or its
-    /// step was not counted in the tick.
+    /// must notify done ([`Doorbell::notify_done`]): it was the last of its
+    /// tick to finish, or its step was not counted in the tick.
     pub fn finished(&self, i: usize, seq: u32) -> bool {
         assert!(i < self.slots, "process {i} of {}", self.slots);
         let slot = self.slot(i);
@@ -362,6 +406,31 @@ mod tests {
         bell.ring(1, 41, true);
         assert_eq!((bell.tick(0), bell.tick(1), bell.tick(2)), (40, 41, 40));
         assert!(bell.is_done(0) && !bell.is_done(1) && bell.is_done(2));
+    }
+
+    #[test]
+    fn done_wakes_the_orchestrator_and_a_notification_before_its_wait_is_not_lost() {
+        let id = run_id("f");
+        let owner = Doorbell::create(&id, 2).unwrap();
+        assert!(!owner.wait_done(owner.done_seq(), Duration::from_millis(10)));
+        // Read, then notified before the wait: the wait returns at once.
+        let seen = owner.done_seq();
+        owner.notify_done();
+        assert!(owner.wait_done(seen, Duration::from_secs(3600)));
+        // Notified from another mapping while the orchestrator sleeps.
+        let seen = owner.done_seq();
+        let (opened, is_open) = std::sync::mpsc::channel();
+        let process = std::thread::spawn(move || {
+            let other = Doorbell::open(&id, 2).unwrap();
+            opened.send(()).unwrap();
+            std::thread::sleep(Duration::from_millis(20));
+            other.notify_done();
+            (other.seq(0), other.seq(1))
+        });
+        is_open.recv().unwrap();
+        assert!(owner.wait_done(seen, Duration::from_secs(10)));
+        assert_eq!(process.join().unwrap(), (0, 0), "no process was rung");
+        assert_eq!(owner.done_seq(), seen.wrapping_add(1));
     }
 
     #[test]

@@ -12,7 +12,9 @@
 //!   process steps on the samples stamped *before* this tick (later ones are
 //!   held back for the next step, so the result does not depend on who ran
 //!   first), then marks its step finished in its doorbell slot; the last
-//!   process of the tick to finish notifies `done` with its own event id.
+//!   process of the tick to finish wakes the orchestrator through the
+//!   doorbell's done counter (the `done` event says only that a process is
+//!   ready).
 //! - **realtime**: the process wakes on its own interval on the wall clock;
 //!   a wake-up later than one period is a deadline miss.
 //!
@@ -107,7 +109,7 @@ pub struct RunArgs {
     /// Process kind (sim-plant, camera-pose, ...).
     #[arg(long)]
     pub process: String,
-    /// This process's index in the run (its `done` event id).
+    /// This process's index in the run (its doorbell slot and `done` event id).
     #[arg(long)]
     pub index: usize,
     /// Number of processes in the run (sizes the `done` event service).
@@ -510,8 +512,7 @@ impl<S: Service> Runtime<S> {
     }
 
     /// Tells the orchestrator that every port of this process exists: the
-    /// `done` event with id [`ready_event_id`] (distinct from a finished
-    /// step's, so a restarted process's "ready" is never taken for a step).
+    /// `done` event with id [`ready_event_id`].
     fn notify_ready(
         &self,
         done: &iceoryx2::port::notifier::Notifier<S>,
@@ -630,13 +631,7 @@ impl<S: Service> Runtime<S> {
                 // orchestrator (it reads the others' slots), and one whose
                 // step the tick did not count.
                 if bell.finished(me, *seen) {
-                    if let Err(e) = done.notify() {
-                        failure = Some(RuntimeError::Io {
-                            service: "done".into(),
-                            source: Box::new(e),
-                        });
-                        return false;
-                    }
+                    bell.notify_done();
                 }
                 if spin_ns == 0 {
                     // Blocking: the next wake-up comes after the orchestrator
@@ -1003,8 +998,8 @@ pub struct ServiceCli {
     pub scenario: std::path::PathBuf,
 }
 
-/// Event id of process `index`'s "ready" on the `done` service (a finished
-/// lockstep step is `index` itself).
+/// Event id of process `index`'s "ready" on the `done` service (finished
+/// lockstep steps are told through the [`Doorbell`], not on it).
 pub const fn ready_event_id(index: usize, processes: usize) -> usize {
     processes + index
 }
