@@ -9,7 +9,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use ipc_types::{Clock, EventKind, Header, RunChannel};
-use shoal_runtime::{ChannelLimits, Mode, Publisher};
+use shoal_runtime::{ChannelLimits, Mode, Publisher, Rung};
 use shoal_scenario::{ProcessKind, ProcessSpec, Scenario};
 
 pub mod os;
@@ -117,7 +117,7 @@ pub(crate) struct Ports {
     /// process is rung again. All false unless [`Ports::detach`] set them.
     detached: Vec<bool>,
     /// The tick rung last.
-    tick: u64,
+    rung: Rung,
     /// Sequence number of the next clock sample.
     clock_seq: u64,
     /// The run's events.
@@ -163,7 +163,7 @@ impl Ports {
             bell,
             local,
             detached,
-            tick: 0,
+            rung: Rung::default(),
             clock_seq: 0,
             journal,
             recovery: Recovery::abort(procs.len()),
@@ -171,7 +171,9 @@ impl Ports {
     }
 
     /// Starts lockstep tick `tick` of `ticks` (each `tick_ns` long): publishes
-    /// the clock, then wakes the processes in `due` (indices into `procs`).
+    /// the clock (for outside readers: a process of the run takes its tick
+    /// from its doorbell slot), then wakes the processes in `due` (indices
+    /// into `procs`).
     pub(crate) fn start_tick(
         &mut self,
         tick: u64,
@@ -195,7 +197,11 @@ impl Ports {
         };
         self.clock_seq += 1;
         self.clock.publish_stamped(clock)?;
-        self.tick = tick;
+        self.rung = Rung {
+            tick,
+            sim_time_ns: sim,
+            last: clock.last != 0,
+        };
         self.bell
             .arm(due.iter().filter(|&&i| !self.detached[i]).count());
         for &i in due {
@@ -209,7 +215,7 @@ impl Ports {
         if !self.local.get(i).copied().unwrap_or(false) {
             anyhow::bail!("{} does not run on this host", procs[i].label());
         }
-        self.bell.ring(i, self.tick, !self.detached[i]);
+        self.bell.ring(i, self.rung, !self.detached[i]);
         Ok(())
     }
 
@@ -835,8 +841,7 @@ pub(crate) fn wait_done(
                 .ready(i, procs, &mut ports.journal, sim_time_s)
                 && (t.pending[i] || ports.owes(i))
             {
-                // Its clock subscriber gets the tick in progress, then the wake-up.
-                ports.clock.update_connections()?;
+                // Its slot gets the tick in progress with the wake-up.
                 ports.wake(i, procs)?;
             }
         }

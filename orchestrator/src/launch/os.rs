@@ -118,7 +118,7 @@ pub fn wake_up_cpu_us(rounds: u32) -> anyhow::Result<f64> {
 /// in shared memory, as the orchestrator wakes a process), µs: two threads
 /// ring each other, each on a mapping of its own.
 pub fn futex_wake_up_cpu_us(rounds: u32) -> anyhow::Result<f64> {
-    use shoal_runtime::Doorbell;
+    use shoal_runtime::{Doorbell, Rung};
     // Waits for slot `i` to move past `seen`.
     fn next(bell: &Doorbell, i: usize, seen: u32) -> u32 {
         loop {
@@ -137,12 +137,12 @@ pub fn futex_wake_up_cpu_us(rounds: u32) -> anyhow::Result<f64> {
             let mut seen = 0;
             for _ in 0..rounds {
                 seen = next(&bell, 0, seen);
-                bell.ring(1, 0, true);
+                bell.ring(1, Rung::default(), true);
             }
             Ok(())
         },
         || {
-            bell.ring(0, 0, true);
+            bell.ring(0, Rung::default(), true);
             seen = next(&bell, 1, seen);
             Ok(())
         },

@@ -11,8 +11,8 @@ use crate::launch::os;
 ///
 /// The shared-memory and file-descriptor models were fitted to measured
 /// runs of the paper scenario (iceoryx2 0.10, 5 vehicles, 26 processes: 48
-/// services, 4.0 MB of shared memory, at most 317 open files in one
-/// process, the recorder; 263 shared-memory files and 615 entries below the
+/// services, 4.8 MB of shared memory, at most 316 open files in one
+/// process, the recorder; 237 shared-memory files and 569 entries below the
 /// domain's root, both in `/dev/shm`) and err on the high side.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub struct Needs {
@@ -92,15 +92,20 @@ pub fn needs(s: &Scenario) -> Needs {
     files += 2 + 2 + 2;
     // events (one publisher) and stats (one publisher per process): a data
     // segment each, a dynamic segment per service; the lockstep doorbell.
+    let elim = ChannelLimits::events();
+    let slim = shoal_runtime::stats::stats_limits(procs.len());
+    shm += data_segment_bytes(std::mem::size_of::<ipc_types::Event>(), &elim)
+        + dynamic_segment_bytes(&elim);
+    shm += n_procs * data_segment_bytes(std::mem::size_of::<ipc_types::ProcessStats>(), &slim)
+        + dynamic_segment_bytes(&slim);
     files += 1 + n_procs + 2 + 1;
     // Connections: the recorder reads every vehicle channel; the consumers
     // of each vehicle (world ← truth; planner and mpc ← nav; plant ← thrust;
     // planner ← sonar, leader_pose; mpc ← setpoint) about seven more; every
-    // camera, sonar and the recorder read the world; every process the clock.
-    // (12 per vehicle and 2 for the run: 140 connection segments measured
-    // in the paper run.)
+    // camera, sonar and the recorder read the world. The clock has no
+    // reader in the run (a process takes its tick from the doorbell).
     let sensors = (vehicles + followers) as u64;
-    let connections = vehicle_channels + 12 * vehicles as u64 + sensors + 2 + n_procs;
+    let connections = vehicle_channels + 12 * vehicles as u64 + sensors + 2;
     shm += connections * CONNECTION_BYTES;
     files += connections;
     let services = vehicle_channels + 5;
@@ -254,13 +259,15 @@ mod tests {
     use super::*;
 
     /// Measured on a live run of the paper scenario (iceoryx2 0.10, this
-    /// repository's limits): 48 services in the domain, 4 014 828 bytes of
-    /// shared memory, 317 open files in the recorder; 263 shared-memory
-    /// files and 615 entries below the domain's root in /dev/shm.
+    /// repository's limits; lockstep, no process reading the clock): 48
+    /// services in the domain, 4 788 530 bytes of shared memory (806 KB of
+    /// it the 26 stats publishers' segments), 316 open files in the
+    /// recorder; 237 shared-memory files and 569 entries below the domain's
+    /// root in /dev/shm.
     const PAPER_SERVICES: u64 = 48;
-    const PAPER_SHM_FILES: u64 = 263 + 615;
-    const PAPER_SHM_BYTES: u64 = 4_014_828;
-    const PAPER_RECORDER_FILES: u64 = 317;
+    const PAPER_SHM_FILES: u64 = 237 + 569;
+    const PAPER_SHM_BYTES: u64 = 4_788_530;
+    const PAPER_RECORDER_FILES: u64 = 316;
 
     #[test]
     fn paper_needs_match_a_measured_run_and_err_high() {

@@ -23,12 +23,13 @@
 //! `recvfrom` for the orchestrator); that event still carries what is rare,
 //! a restarted process's "ready".
 //!
-//! A ring also carries the tick it is for, and whether the tick's count
-//! includes the step. A step it does not include is one the orchestrator
-//! does not wait for at the tick's end (the recorder's, which only has to
-//! be over before it is rung again): that process notifies `done` itself,
-//! and takes its tick from its slot, since the clock may have moved on by
-//! the time it runs.
+//! A ring also carries the tick it is for ([`Rung`]: the tick, its
+//! simulated time, whether it is the run's last), which is all a process
+//! needs of the run's clock, and whether the tick's count includes the
+//! step. A step it does not include is one the orchestrator does not wait
+//! for at the tick's end (the recorder's, which only has to be over before
+//! it is rung again): that process notifies done itself, and its slot still
+//! holds its tick when the run has moved on by the time it runs.
 //!
 //! It replaced an iceoryx2 event per process, whose Unix datagram socket
 //! cost the orchestrator a `sendto` and the process a `ppoll` and one or two
@@ -66,8 +67,23 @@ struct Slot {
     /// Nonzero when the tick's count of processes stepping includes the
     /// step of the latest wake-up.
     counted: AtomicU32,
+    /// Nonzero when the latest wake-up is for the run's last tick.
+    last: AtomicU32,
     /// The tick of the latest wake-up.
     tick: AtomicU64,
+    /// Its simulated time, ns.
+    sim_time_ns: AtomicU64,
+}
+
+/// The tick a wake-up is for, as the process steps on it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Rung {
+    /// The tick, from 0.
+    pub tick: u64,
+    /// Its simulated time, ns since the run started.
+    pub sim_time_ns: u64,
+    /// True for the run's last tick.
+    pub last: bool,
 }
 
 /// Why the doorbell could not be made or opened.
@@ -175,7 +191,7 @@ impl Doorbell {
     fn slot(&self, i: usize) -> &Slot {
         assert!(i < self.slots + EXTRA_SLOTS, "slot {i} of {}", self.slots);
         // SAFETY: the mapping is page aligned and holds `slots + EXTRA_SLOTS` `Slot`s
-        // (checked at open); a `Slot` is two `AtomicU32`s padded to 64 bytes,
+        // (checked at open); a `Slot` is atomic integers padded to 64 bytes,
         // valid for any bit pattern, and every access to it, here and in
         // other processes, is atomic. The reference lives no longer than
         // `self`, which keeps the mapping.
@@ -219,12 +235,7 @@ impl Doorbell {
     /// true when it does (false when the wait ran out or a signal cut it
     /// short).
     pub fn wait_done(&self, seen: u32, timeout: Duration) -> bool {
-        let c = self.done_counter();
-        if c.load(Ordering::Acquire) != seen {
-            return true;
-        }
-        futex(c, libc::FUTEX_WAIT, seen, Some(timeout));
-        c.load(Ordering::Acquire) != seen
+        wait_on(self.done_counter(), seen, timeout).is_some()
     }
 
     /// Sets the count of processes due at the tick about to be rung (the
@@ -269,14 +280,28 @@ impl Doorbell {
         self.slot(i).tick.load(Ordering::Acquire)
     }
 
-    /// Wakes process `i` for one step at `tick`; `counted` when the count
+    /// The tick of process `i`'s latest wake-up, with its simulated time
+    /// and whether it is the run's last (read after the wake-up itself, it
+    /// is the one rung with it).
+    pub fn rung(&self, i: usize) -> Rung {
+        let slot = self.slot(i);
+        Rung {
+            tick: slot.tick.load(Ordering::Acquire),
+            sim_time_ns: slot.sim_time_ns.load(Ordering::Acquire),
+            last: slot.last.load(Ordering::Acquire) != 0,
+        }
+    }
+
+    /// Wakes process `i` for one step at `rung`; `counted` when the count
     /// [`Doorbell::arm`] set includes that step.
-    pub fn ring(&self, i: usize, tick: u64, counted: bool) {
+    pub fn ring(&self, i: usize, rung: Rung, counted: bool) {
         let c = self.counter(i);
         let slot = self.slot(i);
-        slot.tick.store(tick, Ordering::Relaxed);
+        slot.tick.store(rung.tick, Ordering::Relaxed);
+        slot.sim_time_ns.store(rung.sim_time_ns, Ordering::Relaxed);
+        slot.last.store(u32::from(rung.last), Ordering::Relaxed);
         slot.counted.store(u32::from(counted), Ordering::Relaxed);
-        // Release: a process that sees the new counter sees both above.
+        // Release: a process that sees the new counter sees all above.
         c.fetch_add(1, Ordering::Release);
         futex(c, libc::FUTEX_WAKE, 1, None);
     }
@@ -285,17 +310,22 @@ impl Doorbell {
     /// `timeout`; returns the counter, or `None` when the wait ran out or a
     /// signal cut it short.
     pub fn wait(&self, i: usize, seen: u32, timeout: Duration) -> Option<u32> {
-        let c = self.counter(i);
-        let now = c.load(Ordering::Acquire);
-        if now != seen {
-            return Some(now);
-        }
-        // The kernel compares the counter with `seen` before it sleeps, so a
-        // ring between the load above and the wait is never lost.
-        futex(c, libc::FUTEX_WAIT, seen, Some(timeout));
-        let now = c.load(Ordering::Acquire);
-        (now != seen).then_some(now)
+        wait_on(self.counter(i), seen, timeout)
     }
+}
+
+/// Waits at most `timeout` for `word` to move on from `seen`; its new
+/// value, or `None` if it has not moved (timeout or spurious wake-up).
+fn wait_on(word: &AtomicU32, seen: u32, timeout: Duration) -> Option<u32> {
+    let now = word.load(Ordering::Acquire);
+    if now != seen {
+        return Some(now);
+    }
+    // The kernel compares the word with `seen` before it sleeps, so a
+    // change between the load above and the wait is never lost.
+    futex(word, libc::FUTEX_WAIT, seen, Some(timeout));
+    let now = word.load(Ordering::Acquire);
+    (now != seen).then_some(now)
 }
 
 /// `futex(2)` on a word of a shared mapping (not `FUTEX_PRIVATE_FLAG`: the
@@ -335,6 +365,15 @@ mod tests {
         format!("db{tag}{}", std::process::id())
     }
 
+    /// Tick `tick` of a run of 10 ms ticks, not its last.
+    fn at(tick: u64) -> Rung {
+        Rung {
+            tick,
+            sim_time_ns: tick * 10_000_000,
+            last: false,
+        }
+    }
+
     #[test]
     fn a_ring_wakes_the_waiter_of_that_slot_only() {
         let id = run_id("a");
@@ -350,7 +389,7 @@ mod tests {
         });
         is_open.recv().unwrap();
         std::thread::sleep(Duration::from_millis(20));
-        owner.ring(1, 0, true);
+        owner.ring(1, at(0), true);
         let (got, s0, s2) = waiter.join().unwrap();
         assert_eq!(got, Some(seen.wrapping_add(1)));
         assert_eq!((s0, s2), (0, 0), "the other slots did not move");
@@ -361,8 +400,8 @@ mod tests {
         let id = run_id("b");
         let bell = Doorbell::create(&id, 2).unwrap();
         assert_eq!(bell.wait(0, 0, Duration::from_millis(10)), None);
-        bell.ring(0, 0, true);
-        bell.ring(0, 1, true);
+        bell.ring(0, at(0), true);
+        bell.ring(0, at(1), true);
         assert_eq!(bell.wait(0, 0, Duration::from_secs(10)), Some(2));
     }
 
@@ -372,15 +411,15 @@ mod tests {
         let bell = Doorbell::create(&id, 3).unwrap();
         assert!((0..3).all(|i| bell.is_done(i)), "nothing rung yet");
         bell.arm(2);
-        bell.ring(0, 0, true);
-        bell.ring(2, 0, true);
+        bell.ring(0, at(0), true);
+        bell.ring(2, at(0), true);
         assert!(!bell.is_done(0) && bell.is_done(1) && !bell.is_done(2));
         assert!(!bell.finished(2, bell.seq(2)), "one still stepping");
         assert!(bell.is_done(2) && !bell.is_done(0));
         assert!(bell.finished(0, bell.seq(0)), "the last one notifies");
         assert!((0..3).all(|i| bell.is_done(i)));
         // Rung as counted, but past the count (it cannot happen in lockstep).
-        bell.ring(1, 1, true);
+        bell.ring(1, at(1), true);
         assert!(
             !bell.finished(1, bell.seq(1)),
             "a step the count no longer holds is no tick's end"
@@ -392,9 +431,9 @@ mod tests {
         let id = run_id("e");
         let bell = Doorbell::create(&id, 3).unwrap();
         bell.arm(2);
-        bell.ring(0, 40, false);
-        bell.ring(1, 40, true);
-        bell.ring(2, 40, true);
+        bell.ring(0, at(40), false);
+        bell.ring(1, at(40), true);
+        bell.ring(2, at(40), true);
         assert!(bell.finished(0, bell.seq(0)), "uncounted: it notifies");
         assert!(
             !bell.finished(1, bell.seq(1)),
@@ -403,9 +442,17 @@ mod tests {
         assert!(bell.finished(2, bell.seq(2)), "the last counted one");
         // The next tick rings process 1 alone: process 0's slot keeps 40.
         bell.arm(1);
-        bell.ring(1, 41, true);
+        bell.ring(1, at(41), true);
         assert_eq!((bell.tick(0), bell.tick(1), bell.tick(2)), (40, 41, 40));
+        assert_eq!((bell.rung(0), bell.rung(1)), (at(40), at(41)));
         assert!(bell.is_done(0) && !bell.is_done(1) && bell.is_done(2));
+        let end = Rung {
+            tick: 42,
+            sim_time_ns: 420_000_000,
+            last: true,
+        };
+        bell.ring(2, end, true);
+        assert_eq!(bell.rung(2), end);
     }
 
     #[test]

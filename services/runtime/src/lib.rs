@@ -6,9 +6,9 @@
 //! A service is a [`Task`]: it opens its ports in its constructor through the
 //! [`Runtime`], then [`Runtime::run`] calls [`Task::step`] once per wake-up:
 //!
-//! - **lockstep**: the orchestrator publishes the [`Clock`](ipc_types::Clock)
-//!   and rings the process's counter of the run's [`Doorbell`] (a futex in
-//!   shared memory) on the ticks where it is due; the
+//! - **lockstep**: the orchestrator rings the process's counter of the
+//!   run's [`Doorbell`] (a futex in shared memory) on the ticks where it is
+//!   due, its slot holding the tick ([`Rung`]); the
 //!   process steps on the samples stamped *before* this tick (later ones are
 //!   held back for the next step, so the result does not depend on who ran
 //!   first), then marks its step finished in its doorbell slot; the last
@@ -51,13 +51,13 @@ use std::time::Duration;
 use iceoryx2::prelude::*;
 pub use iceoryx2::service::{ipc, local, Service};
 use iceoryx2_bb_posix::signal::SignalHandler;
-use ipc_types::{Clock, RunChannel};
+use ipc_types::RunChannel;
 
 pub use domain::{
     alive_nodes, cleanup_domain, iceoryx_config, list_domain_files, release_domain, stale_domains,
     sweep_stale_domains, ChannelLimits, Release, EVENTS_HISTORY,
 };
-pub use doorbell::Doorbell;
+pub use doorbell::{Doorbell, Rung};
 pub use latency::LatencyRecorder;
 pub use ports::{Publisher, Subscriber};
 pub use stamp::stamp_ns;
@@ -544,17 +544,6 @@ impl<S: Service> Runtime<S> {
         // Read before "ready": a ring older than that is not a wake-up for
         // this process (it steps when the orchestrator rings it anew).
         let mut seen = bell.seq(me);
-        let clock_name = ipc_types::run_service_name(&self.args.run_id, RunChannel::Clock);
-        let clock_limits = ChannelLimits::clock(self.args.processes);
-        let clock: Subscriber<Clock, S> = Subscriber::open(
-            &self.node,
-            &clock_name,
-            &clock_limits,
-            2,
-            Mode::Realtime, // the clock itself is never held back
-        )?
-        // a process due every k-th tick reads the latest tick only
-        .latest_only();
         let done = self.done_notifier()?;
         // The first read installs iceoryx2's SIGINT/SIGTERM handlers (no
         // request can have been caught before them): from here on a
@@ -565,8 +554,6 @@ impl<S: Service> Runtime<S> {
 
         let mut last_sim: Option<u64> = None;
         let mut failure: Option<RuntimeError> = None;
-        let mut clock = clock;
-        let mut latest_clock: Option<Clock> = None;
         let spin_ns = self.args.spin_us * 1_000;
         // Steps on a wake-up (the doorbell counter now `now`, last stepped
         // on `seen`); false once the run must end.
@@ -588,32 +575,18 @@ impl<S: Service> Runtime<S> {
                     return true;
                 };
                 *seen = n;
-                match clock.drain_latest() {
-                    Ok(Some(c)) => latest_clock = Some(c),
-                    Ok(None) => {}
-                    Err(e) => {
-                        failure = Some(e);
-                        return false;
-                    }
-                }
-                let Some(c) = latest_clock else {
-                    return true;
-                };
-                // The tick rung: the clock's newest unless this step is one
-                // the orchestrator does not wait for, and the clock moved on.
-                let rung = bell.tick(me);
-                let (sim, tick, last) = if c.tick == rung {
-                    (c.header.sim_time_ns, c.tick, c.last != 0)
-                } else {
-                    (rung.saturating_mul(c.tick_ns), rung, false)
-                };
+                // The tick rung, from the slot (the run may be at a later
+                // tick when this step is one the orchestrator does not wait
+                // for).
+                let rung = bell.rung(me);
+                let sim = rung.sim_time_ns;
                 let wake_mono_ns = mono_ns();
                 let ctx = StepContext {
                     sim_time_ns: sim,
-                    tick,
+                    tick: rung.tick,
                     wake_mono_ns,
                     since_last_ns: last_sim.map_or(0, |l| sim.saturating_sub(l)),
-                    last,
+                    last: rung.last,
                     mode: Mode::Lockstep,
                     woken_by: Wake::Tick,
                 };

@@ -394,9 +394,6 @@ pub struct Subscriber<T: Sample, S: Service = ipc::Service> {
     /// Next expected sequence number of each publisher (a service may have
     /// several: the stats channel, a restarted process).
     next_seq: Vec<(u128, u64)>,
-    /// False for a channel read for its latest sample only (the clock): the
-    /// samples its small buffer overwrote are skipped by design, not lost.
-    count_gaps: bool,
     lost: u64,
     rejected: u64,
     hops: Rc<RefCell<HopEntry>>,
@@ -426,7 +423,6 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
             held: VecDeque::with_capacity(2 * limits.max_buffer),
             held_in_place: VecDeque::with_capacity(BORROWED_SAMPLES),
             next_seq: Vec::new(),
-            count_gaps: true,
             lost: 0,
             rejected: 0,
             hops: hop_entry(channel_kind(service)),
@@ -436,13 +432,6 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
     /// The service name.
     pub fn service(&self) -> &str {
         &self.service
-    }
-
-    /// Reads only the latest sample: gaps in the sequence are not counted
-    /// as lost (see [`Subscriber::lost`]).
-    pub fn latest_only(mut self) -> Self {
-        self.count_gaps = false;
-        self
     }
 
     /// Samples that never arrived (gaps in the publisher's sequence).
@@ -656,7 +645,7 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
             .record_ns(taken.saturating_sub(h.publish_mono_ns));
         match self.next_seq.iter_mut().find(|(p, _)| *p == publisher) {
             Some((_, n)) => {
-                if h.seq > *n && self.count_gaps {
+                if h.seq > *n {
                     self.lost += h.seq - *n;
                     hops.lost += h.seq - *n;
                 }
