@@ -152,6 +152,16 @@ impl Ports {
         let done_fd = shoal_runtime::listener_fd(&done);
         let bell =
             shoal_runtime::Doorbell::create(run_id, procs.len()).context("lockstep doorbell")?;
+        // Processes due at the same ticks (same rate and phase) sleep on one
+        // gate, so that a tick wakes each such group in one system call.
+        // (By position: a replay's one process keeps its index in the run.)
+        for (i, p) in procs.iter().enumerate() {
+            let leader = procs
+                .iter()
+                .position(|q| (q.divisor, q.phase) == (p.divisor, p.phase))
+                .unwrap_or(i);
+            bell.join(i, leader);
+        }
         let local = procs.iter().map(local).collect();
         let detached = vec![false; procs.len()];
         let journal = Journal::open(&node, run_id)?;
@@ -205,17 +215,25 @@ impl Ports {
         self.bell
             .arm(due.iter().filter(|&&i| !self.detached[i]).count());
         for &i in due {
-            self.wake(i, procs)?;
+            self.ensure_local(i, procs)?;
         }
+        self.bell.ring_all(due, self.rung, |i| !self.detached[i]);
         Ok(())
     }
 
     /// Wakes process `i` (a process of this host) for the tick rung last.
     pub(crate) fn wake(&self, i: usize, procs: &[ProcessSpec]) -> anyhow::Result<()> {
+        self.ensure_local(i, procs)?;
+        self.bell.ring(i, self.rung, !self.detached[i]);
+        Ok(())
+    }
+
+    /// Fails unless process `i` runs on this host (only those have a
+    /// doorbell slot here).
+    fn ensure_local(&self, i: usize, procs: &[ProcessSpec]) -> anyhow::Result<()> {
         if !self.local.get(i).copied().unwrap_or(false) {
             anyhow::bail!("{} does not run on this host", procs[i].label());
         }
-        self.bell.ring(i, self.rung, !self.detached[i]);
         Ok(())
     }
 

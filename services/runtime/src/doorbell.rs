@@ -38,6 +38,14 @@
 //! by futex and 20 to 25 µs by datagram socket with `poll` (the same
 //! wake-ups, counted in a C ping-pong of 100 000 round trips).
 //!
+//! Processes rung at the same ticks (the same rate and phase: every
+//! vehicle's sonar, say) form a group: each sleeps on its group's gate, a
+//! further counter in the group's first slot, instead of its own counter.
+//! The orchestrator moves every due counter, then each group's gate once,
+//! and one `FUTEX_WAKE` wakes the whole group: a system call per group of
+//! a tick instead of one per process. A member woken without its counter
+//! moving (a restarted process rung alone wakes its group) sleeps again.
+//!
 //! A counter changed before a process read it for the first time is not a
 //! wake-up for it: a process reads its counter before it reports ready, so
 //! a restarted process steps only when the orchestrator rings it anew.
@@ -69,6 +77,12 @@ struct Slot {
     counted: AtomicU32,
     /// Nonzero when the latest wake-up is for the run's last tick.
     last: AtomicU32,
+    /// The gate of the group whose leader this slot is: wake-ups rung to
+    /// the group so far ([`Doorbell::join`]).
+    gate: AtomicU32,
+    /// 1 + the slot whose gate this process sleeps on; 0 when it sleeps on
+    /// its own counter.
+    group: AtomicU32,
     /// The tick of the latest wake-up.
     tick: AtomicU64,
     /// Its simulated time, ns.
@@ -235,7 +249,8 @@ impl Doorbell {
     /// true when it does (false when the wait ran out or a signal cut it
     /// short).
     pub fn wait_done(&self, seen: u32, timeout: Duration) -> bool {
-        wait_on(self.done_counter(), seen, timeout).is_some()
+        let done = self.done_counter();
+        wait_on(done, done, seen, timeout).is_some()
     }
 
     /// Sets the count of processes due at the tick about to be rung (the
@@ -292,9 +307,28 @@ impl Doorbell {
         }
     }
 
-    /// Wakes process `i` for one step at `rung`; `counted` when the count
-    /// [`Doorbell::arm`] set includes that step.
-    pub fn ring(&self, i: usize, rung: Rung, counted: bool) {
+    /// Makes process `i` sleep on the gate of `leader`'s group instead of
+    /// its own counter (the orchestrator, before it rings `i`; `leader` is
+    /// a process of the run, `i` itself for the group's first). Processes
+    /// always rung at the same ticks share a group, so that
+    /// [`Doorbell::ring_all`] wakes them in one system call.
+    pub fn join(&self, i: usize, leader: usize) {
+        assert!(leader < self.slots, "leader {leader} of {}", self.slots);
+        let leader = u32::try_from(leader + 1).unwrap_or(0);
+        self.slot(i).group.store(leader, Ordering::Release);
+    }
+
+    /// The word process `i` sleeps on: its group's gate, or its counter.
+    fn gate(&self, i: usize) -> &AtomicU32 {
+        match self.slot(i).group.load(Ordering::Acquire) {
+            0 => self.counter(i),
+            g => &self.slot((g as usize - 1).min(self.slots - 1)).gate,
+        }
+    }
+
+    /// Stores the wake-up of process `i` in its slot and counts it; it is
+    /// seen once its gate moves (or right away by a process awake).
+    fn stage(&self, i: usize, rung: Rung, counted: bool) {
         let c = self.counter(i);
         let slot = self.slot(i);
         slot.tick.store(rung.tick, Ordering::Relaxed);
@@ -303,27 +337,74 @@ impl Doorbell {
         slot.counted.store(u32::from(counted), Ordering::Relaxed);
         // Release: a process that sees the new counter sees all above.
         c.fetch_add(1, Ordering::Release);
-        futex(c, libc::FUTEX_WAKE, 1, None);
+    }
+
+    /// Moves process `i`'s gate on and wakes who sleeps on it: `i` alone,
+    /// or its whole group (a member not rung goes back to sleep).
+    fn open_gate(&self, i: usize) {
+        let gate = self.gate(i);
+        if std::ptr::eq(gate, self.counter(i)) {
+            futex(gate, libc::FUTEX_WAKE, 1, None);
+        } else {
+            // Release, after the counters: a process that sees the gate
+            // move sees its counter moved.
+            gate.fetch_add(1, Ordering::Release);
+            futex(gate, libc::FUTEX_WAKE, u32::MAX >> 1, None);
+        }
+    }
+
+    /// Wakes process `i` for one step at `rung`; `counted` when the count
+    /// [`Doorbell::arm`] set includes that step.
+    pub fn ring(&self, i: usize, rung: Rung, counted: bool) {
+        self.stage(i, rung, counted);
+        self.open_gate(i);
+    }
+
+    /// Wakes the processes `due` for one step at `rung` (`counted(i)` as
+    /// in [`Doorbell::ring`]), with one system call per group of them.
+    pub fn ring_all(&self, due: &[usize], rung: Rung, counted: impl Fn(usize) -> bool) {
+        for &i in due {
+            self.stage(i, rung, counted(i));
+        }
+        // The groups woken so far; a tick has a handful. Past that many a
+        // group is woken again, which costs a system call and nothing else.
+        let mut opened = [std::ptr::null::<AtomicU32>(); 16];
+        let mut n = 0;
+        for &i in due {
+            let gate: *const AtomicU32 = self.gate(i);
+            if opened[..n].contains(&gate) {
+                continue;
+            }
+            self.open_gate(i);
+            if n < opened.len() {
+                opened[n] = gate;
+                n += 1;
+            }
+        }
     }
 
     /// Sleeps until process `i`'s counter differs from `seen`, at most
-    /// `timeout`; returns the counter, or `None` when the wait ran out or a
-    /// signal cut it short.
+    /// `timeout`; returns the counter, or `None` when the wait ran out, a
+    /// signal cut it short or its group was woken without it.
     pub fn wait(&self, i: usize, seen: u32, timeout: Duration) -> Option<u32> {
-        wait_on(self.counter(i), seen, timeout)
+        wait_on(self.gate(i), self.counter(i), seen, timeout)
     }
 }
 
-/// Waits at most `timeout` for `word` to move on from `seen`; its new
-/// value, or `None` if it has not moved (timeout or spurious wake-up).
-fn wait_on(word: &AtomicU32, seen: u32, timeout: Duration) -> Option<u32> {
+/// Waits at most `timeout` for `word` to move on from `seen`, asleep on
+/// `gate` (`word` itself, or a gate that moves after it); its new value,
+/// or `None` if it has not moved (timeout or spurious wake-up).
+fn wait_on(gate: &AtomicU32, word: &AtomicU32, seen: u32, timeout: Duration) -> Option<u32> {
+    // The gate first: if the word has not moved when read after it, a
+    // later move of the word moves the gate too, after the value read here.
+    let g = gate.load(Ordering::Acquire);
     let now = word.load(Ordering::Acquire);
     if now != seen {
         return Some(now);
     }
-    // The kernel compares the word with `seen` before it sleeps, so a
-    // change between the load above and the wait is never lost.
-    futex(word, libc::FUTEX_WAIT, seen, Some(timeout));
+    // The kernel compares the gate with `g` before it sleeps, so a change
+    // between the loads above and the wait is never lost.
+    futex(gate, libc::FUTEX_WAIT, g, Some(timeout));
     let now = word.load(Ordering::Acquire);
     (now != seen).then_some(now)
 }
@@ -393,6 +474,59 @@ mod tests {
         let (got, s0, s2) = waiter.join().unwrap();
         assert_eq!(got, Some(seen.wrapping_add(1)));
         assert_eq!((s0, s2), (0, 0), "the other slots did not move");
+    }
+
+    #[test]
+    fn a_group_is_woken_at_once_and_a_member_not_rung_sleeps_on() {
+        let id = run_id("g");
+        let owner = Doorbell::create(&id, 4).unwrap();
+        // 0, 1 and 3 share 0's gate; 2 sleeps on its own counter.
+        for i in [0, 1, 3] {
+            owner.join(i, 0);
+        }
+        let (opened, is_open) = std::sync::mpsc::channel();
+        let waiters: Vec<_> = (0..4)
+            .map(|i| {
+                let id = id.clone();
+                let opened = opened.clone();
+                std::thread::spawn(move || {
+                    let other = Doorbell::open(&id, 4).unwrap();
+                    opened.send(()).unwrap();
+                    // Waits as a process does: again after a wake-up that
+                    // was not its own, until its slot moves or 300 ms pass.
+                    let start = std::time::Instant::now();
+                    while start.elapsed() < Duration::from_millis(300) {
+                        if let Some(s) = other.wait(i, 0, Duration::from_millis(300)) {
+                            return (Some(s), other.rung(i));
+                        }
+                    }
+                    (None, other.rung(i))
+                })
+            })
+            .collect();
+        for _ in 0..4 {
+            is_open.recv().unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(20));
+        owner.arm(3);
+        owner.ring_all(&[0, 2, 3], at(7), |i| i != 2);
+        let got: Vec<_> = waiters.into_iter().map(|w| w.join().unwrap()).collect();
+        assert_eq!(got[0], (Some(1), at(7)));
+        assert_eq!(got[2], (Some(1), at(7)), "the one alone, on its counter");
+        assert_eq!(got[3], (Some(1), at(7)));
+        assert_eq!(got[1], (None, Rung::default()), "not rung: it slept on");
+        assert_eq!(owner.slot(2).counted.load(Ordering::Relaxed), 0);
+        // A member rung alone (a restarted process) is woken through the gate.
+        let member = {
+            let id = id.clone();
+            std::thread::spawn(move || {
+                let other = Doorbell::open(&id, 4).unwrap();
+                other.wait(3, 1, Duration::from_secs(10))
+            })
+        };
+        std::thread::sleep(Duration::from_millis(20));
+        owner.ring(3, at(8), true);
+        assert_eq!(member.join().unwrap(), Some(2));
     }
 
     #[test]
