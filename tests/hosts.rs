@@ -81,8 +81,8 @@ fn one_host_and_k_hosts(dir: &Path, scenario: &Path, k: usize, during: impl FnOn
     ]);
     let (net, hosts_toml) = net_with_agents(dir, k);
     let spread = dir.join("hosts");
-    let child = spawn_over_hosts(&net, scenario, &hosts_toml, &spread);
-    wait_run_json(&spread, Duration::from_secs(30));
+    let mut child = spawn_over_hosts(&net, scenario, &hosts_toml, &spread);
+    wait_child_run_json(&mut child, &spread, Duration::from_secs(30));
     during(&net);
     let o = child.wait_with_output().unwrap();
     let agent_logs: String = (1..=k)
@@ -158,9 +158,9 @@ fn a_killed_agent_stops_the_run_on_every_host_with_the_cause_named() {
     let (mut net, hosts_toml) = net_with_agents(dir, 2);
     let sc = write_scenario(dir, "long.toml", &small_scenario("long", 600.0));
     let out = dir.join("run");
-    let child = spawn_over_hosts(&net, &sc, &hosts_toml, &out);
+    let mut child = spawn_over_hosts(&net, &sc, &hosts_toml, &out);
     // Once the run is under way (its id is written, the hosts started).
-    wait_run_json(&out, Duration::from_secs(30));
+    wait_child_run_json(&mut child, &out, Duration::from_secs(30));
     std::thread::sleep(Duration::from_secs(3));
     net.stop_agent(1, libc::SIGKILL, Duration::from_secs(5));
     let o = child.wait_with_output().unwrap();
@@ -202,8 +202,8 @@ fn a_link_cut_past_the_lease_stops_every_host_cleanly_with_the_cause_named() {
     let (net, hosts_toml) = net_with_agents(dir, 2);
     let sc = write_scenario(dir, "long.toml", &small_scenario("long", 600.0));
     let out = dir.join("run");
-    let child = spawn_over_hosts(&net, &sc, &hosts_toml, &out);
-    wait_run_json(&out, Duration::from_secs(30));
+    let mut child = spawn_over_hosts(&net, &sc, &hosts_toml, &out);
+    wait_child_run_json(&mut child, &out, Duration::from_secs(30));
     std::thread::sleep(Duration::from_secs(2));
     net.set_link(1, false).unwrap();
     let o = child.wait_with_output().unwrap();

@@ -137,12 +137,40 @@ pub fn write_scenario(dir: &Path, file: &str, text: &str) -> PathBuf {
 
 /// Reads `run.json` of a live or finished run, waiting up to `timeout` for it.
 pub fn wait_run_json(out: &Path, timeout: Duration) -> serde_json::Value {
+    wait_run_json_unless(out, timeout, || None)
+}
+
+/// Waits as [`wait_run_json`] for the run `child` is, but fails at once
+/// with its standard error when it ends without having written `run.json`.
+pub fn wait_child_run_json(child: &mut Child, out: &Path, timeout: Duration) -> serde_json::Value {
+    wait_run_json_unless(out, timeout, || {
+        let status = child.try_wait().unwrap()?;
+        let mut err = String::new();
+        if let Some(mut e) = child.stderr.take() {
+            std::io::Read::read_to_string(&mut e, &mut err).unwrap();
+        }
+        Some(format!(
+            "the run ended ({status}) before run.json appeared:\n{err}"
+        ))
+    })
+}
+
+/// Polls for `out`/run.json until `timeout`; panics with what `ended` says
+/// as soon as it says something.
+fn wait_run_json_unless(
+    out: &Path,
+    timeout: Duration,
+    mut ended: impl FnMut() -> Option<String>,
+) -> serde_json::Value {
     let start = Instant::now();
     loop {
         if let Ok(t) = std::fs::read_to_string(out.join("run.json")) {
             if let Ok(v) = serde_json::from_str(&t) {
                 return v;
             }
+        }
+        if let Some(why) = ended() {
+            panic!("{why}");
         }
         assert!(
             start.elapsed() < timeout,
