@@ -339,10 +339,10 @@ impl Doorbell {
         c.fetch_add(1, Ordering::Release);
     }
 
-    /// Moves process `i`'s gate on and wakes who sleeps on it: `i` alone,
-    /// or its whole group (a member not rung goes back to sleep).
-    fn open_gate(&self, i: usize) {
-        let gate = self.gate(i);
+    /// Moves `gate`, process `i`'s ([`Doorbell::gate`]), on and wakes who
+    /// sleeps on it: `i` alone, or its whole group (a member not rung goes
+    /// back to sleep).
+    fn open_gate(&self, i: usize, gate: &AtomicU32) {
         if std::ptr::eq(gate, self.counter(i)) {
             futex(gate, libc::FUTEX_WAKE, 1, None);
         } else {
@@ -357,7 +357,7 @@ impl Doorbell {
     /// [`Doorbell::arm`] set includes that step.
     pub fn ring(&self, i: usize, rung: Rung, counted: bool) {
         self.stage(i, rung, counted);
-        self.open_gate(i);
+        self.open_gate(i, self.gate(i));
     }
 
     /// Wakes the processes `due` for one step at `rung` (`counted(i)` as
@@ -371,13 +371,14 @@ impl Doorbell {
         let mut opened = [std::ptr::null::<AtomicU32>(); 16];
         let mut n = 0;
         for &i in due {
-            let gate: *const AtomicU32 = self.gate(i);
-            if opened[..n].contains(&gate) {
+            let gate = self.gate(i);
+            let at: *const AtomicU32 = gate;
+            if opened[..n].contains(&at) {
                 continue;
             }
-            self.open_gate(i);
+            self.open_gate(i, gate);
             if n < opened.len() {
-                opened[n] = gate;
+                opened[n] = at;
                 n += 1;
             }
         }
