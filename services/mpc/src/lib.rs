@@ -582,7 +582,9 @@ impl Mpc {
         for k in 0..horizon {
             sum += phi;
             self.psi[k] = sum;
-            phi = ad * phi;
+            if k + 1 < horizon {
+                phi = prediction::advance(&ad, &phi);
+            }
         }
         for blk in &mut self.hess {
             blk.fill(0.0);
@@ -634,8 +636,16 @@ impl Mpc {
                 self.ws_blk[b] = wsb;
             }
             for b in 0..active {
-                for c in b..active {
-                    self.hess[b * nb + c] += self.s_blk[b].tr_mul(&self.ws_blk[c]);
+                let sb = &self.s_blk[b];
+                // Only the upper triangle of a diagonal block is ever read.
+                let (wsb, hbb) = (&self.ws_blk[b], &mut self.hess[b * nb + b]);
+                for ci in 0..NU {
+                    for ri in 0..=ci {
+                        hbb[(ri, ci)] += sb.column(ri).dot(&wsb.column(ci));
+                    }
+                }
+                for c in b + 1..active {
+                    self.hess[b * nb + c] += sb.tr_mul(&self.ws_blk[c]);
                 }
             }
         }
