@@ -107,7 +107,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
 };
-use nalgebra::{DMatrix, DVector, Matrix6, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Matrix6, SMatrix, UnitQuaternion, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 use sim_plant::model::Vehicle;
 
@@ -394,8 +394,8 @@ pub struct Mpc {
     // scratch, allocated once
     /// `Ψ_k = Σ_{l≤k} A_d^l B_d`, k = 0..P−1.
     psi: Vec<InputMat>,
-    /// `S_j` blocks and `diag(ρ₁) S_j` blocks of the current prediction step.
-    s_blk: Vec<InputMat>,
+    /// `S_jᵀ` blocks and `diag(ρ₁) S_j` blocks of the current prediction step.
+    s_blk: Vec<InputRowMat>,
     ws_blk: Vec<InputMat>,
     /// Hessian blocks `H_bc` (row-major nb × nb; only b ≤ c used) and gradient blocks.
     hess: Vec<Matrix6<f64>>,
@@ -425,6 +425,28 @@ fn wrap_pi(a: f64) -> f64 {
         w + std::f64::consts::TAU
     } else {
         w
+    }
+}
+
+/// `S_jᵀ` of one block: 6 × 12.
+type InputRowMat = SMatrix<f64, NU, { prediction::NX }>;
+
+/// `h += sᵀ ws` given `st = sᵀ`: each entry summed exactly as nalgebra's `tr_mul` sums its
+/// dot product of length 12 (eight partial products added in pairs, then the last four in
+/// turn), but a whole column of `h` at once, so the six sums run side by side in vector
+/// lanes instead of one horizontal reduction per entry.
+fn add_tr_mul(h: &mut Matrix6<f64>, st: &InputRowMat, ws: &InputMat) {
+    for ci in 0..NU {
+        let w = ws.column(ci);
+        let p = |k: usize| st.column(k) * w[k];
+        let mut r = (p(0) + p(4)) + (p(1) + p(5));
+        r += p(2) + p(6);
+        r += p(3) + p(7);
+        for k in 8..prediction::NX {
+            r += p(k);
+        }
+        let mut col = h.column_mut(ci);
+        col += r;
     }
 }
 
@@ -483,7 +505,7 @@ impl Mpc {
             block_start,
             block_end,
             psi: vec![InputMat::zeros(); config.horizon],
-            s_blk: vec![InputMat::zeros(); n_blocks],
+            s_blk: vec![InputRowMat::zeros(); n_blocks],
             ws_blk: vec![InputMat::zeros(); n_blocks],
             hess: vec![Matrix6::zeros(); n_blocks * n_blocks],
             grad: vec![Vector6::zeros(); n_blocks],
@@ -632,20 +654,12 @@ impl Mpc {
                     }
                 }
                 self.grad[b] += sb.tr_mul(&we0);
-                self.s_blk[b] = sb;
+                self.s_blk[b] = sb.transpose();
                 self.ws_blk[b] = wsb;
             }
             for b in 0..active {
-                let sb = &self.s_blk[b];
-                // Only the upper triangle of a diagonal block is ever read.
-                let (wsb, hbb) = (&self.ws_blk[b], &mut self.hess[b * nb + b]);
-                for ci in 0..NU {
-                    for ri in 0..=ci {
-                        hbb[(ri, ci)] += sb.column(ri).dot(&wsb.column(ci));
-                    }
-                }
-                for c in b + 1..active {
-                    self.hess[b * nb + c] += sb.tr_mul(&self.ws_blk[c]);
+                for c in b..active {
+                    add_tr_mul(&mut self.hess[b * nb + c], &self.s_blk[b], &self.ws_blk[c]);
                 }
             }
         }
@@ -1000,6 +1014,24 @@ mod tests {
             assert!(e.contains(key), "{e}");
         }
         assert!(MpcConfig::default().validate().is_ok());
+    }
+
+    proptest::proptest! {
+        /// The column-at-a-time Hessian update gives bit for bit what nalgebra's `tr_mul`
+        /// gives.
+        #[test]
+        fn add_tr_mul_equals_nalgebras_tr_mul(
+            s in proptest::collection::vec(-1e3f64..1e3, 72),
+            w in proptest::collection::vec(-1e3f64..1e3, 72),
+            h0 in proptest::collection::vec(-1e3f64..1e3, 36),
+        ) {
+            let s = InputMat::from_column_slice(&s);
+            let ws = InputMat::from_column_slice(&w);
+            let mut h = Matrix6::from_column_slice(&h0);
+            let want = h + s.tr_mul(&ws);
+            add_tr_mul(&mut h, &s.transpose(), &ws);
+            proptest::prop_assert_eq!(h, want);
+        }
     }
 
     proptest::proptest! {
