@@ -88,6 +88,7 @@ pub fn jacobians(
 /// only products with exact zeros, whose sums are unchanged, so both paths give the same
 /// numbers (a test checks it) and the structured one costs about a third less.
 #[must_use]
+#[inline(always)]
 pub fn discretise(
     a: &StateMat,
     b: &InputMat,
@@ -129,6 +130,7 @@ fn gamma_dense(a: &StateMat, h: f64) -> (StateMat, StateMat) {
 /// (k ≥ 1) then have zero first columns as well, so only their last nine columns are kept
 /// and multiplied by the lower-right 9 × 9 block of `A h`. The first three columns of both
 /// sums stay those of the identity.
+#[inline(always)]
 fn gamma_position_free(a: &StateMat, h: f64) -> (StateMat, StateMat) {
     const NP: usize = 3;
     const NR: usize = NX - NP;
@@ -161,6 +163,7 @@ fn gamma_position_free(a: &StateMat, h: f64) -> (StateMat, StateMat) {
 /// them from [`jacobians`], the products with their exact zeros and ones are skipped; each
 /// entry is still summed in the full product's order, so the result is the same.
 #[must_use]
+#[inline(always)]
 pub fn advance(ad: &StateMat, m: &InputMat) -> InputMat {
     let identity = StateMat::identity();
     if ad.fixed_columns::<3>(0) != identity.fixed_columns::<3>(0) {
