@@ -135,22 +135,19 @@ fn gamma_position_free(a: &StateMat, h: f64) -> (StateMat, StateMat) {
     const NP: usize = 3;
     const NR: usize = NX - NP;
     let ah: SMatrix<f64, NR, NR> = a.fixed_view::<NR, NR>(NP, NP) * h;
+    // The first term, `A h`, is the one that needs `A`'s top rows; the later ones follow
+    // from it through the 9 × 9 block.
     let mut term: SMatrix<f64, NX, NR> = a.fixed_columns::<NR>(NP) * h;
-    let mut ad: SMatrix<f64, NX, NR> = StateMat::identity().fixed_columns::<NR>(NP).into_owned();
-    let mut gsum = ad;
-    ad += term;
-    gsum += term / 2.0;
-    // `ad` also holds the identity's ones in its first columns.
-    let amax = |m: &SMatrix<f64, NX, NR>| m.amax().max(1.0);
-    if term.amax() > TAYLOR_TOL * amax(&ad) {
-        for k in 2..=TAYLOR_TERMS {
-            term = term * ah / f64::from(k);
-            ad += term;
-            gsum += term / f64::from(k + 1);
-            if term.amax() <= TAYLOR_TOL * amax(&ad) {
-                break;
-            }
-        }
+    let identity: SMatrix<f64, NX, NR> = StateMat::identity().fixed_columns::<NR>(NP).into_owned();
+    let mut ad = identity + term;
+    let mut gsum = identity + term / 2.0;
+    // The full `ad` also holds the identity's ones in its first columns.
+    let mut k = 1;
+    while k < TAYLOR_TERMS && term.amax() > TAYLOR_TOL * ad.amax().max(1.0) {
+        k += 1;
+        term = term * ah / f64::from(k);
+        ad += term;
+        gsum += term / f64::from(k + 1);
     }
     let mut ad_full = StateMat::identity();
     ad_full.fixed_columns_mut::<NR>(NP).copy_from(&ad);
