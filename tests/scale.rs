@@ -191,3 +191,63 @@ fn bench_scale_writes_its_table_figures_and_plot() {
         );
     }
 }
+
+#[test]
+fn bench_scale_floor_rings_every_vehicle_process_and_none_of_them_works() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("floor");
+    let o = run_shoal(&[
+        "bench",
+        "scale",
+        "--vehicles",
+        "3",
+        "--duration",
+        "2",
+        "--floor",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{said}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(said.contains("floor"), "{said}");
+    let figures: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("scale.json")).unwrap()).unwrap();
+    assert_eq!(figures["floor"], serde_json::json!(true), "{figures}");
+
+    // every vehicle process stepped at each of its ticks: 10 Hz for 2 s,
+    // the camera on the two followers only
+    let s = summary(&out.join("n003"));
+    let steps = |kind: &str| {
+        s.pointer(&format!("/step_us/{kind}/count"))
+            .and_then(serde_json::Value::as_u64)
+            .unwrap_or_else(|| panic!("no steps of {kind}: {}", s["step_us"]))
+    };
+    for kind in ["sim-plant", "sonar", "planner", "mpc"] {
+        assert_eq!(steps(kind), 3 * 20, "{kind}");
+    }
+    assert_eq!(steps("camera-pose"), 2 * 20);
+
+    // and none published a sample of its own: only the run's channels
+    // (the world's snapshots, the statistics) hold messages
+    let recording = out.join("n003").join("recording.mcap");
+    let o = run_shoal(&["inspect", recording.to_str().unwrap()]);
+    let listing = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{listing}");
+    let mut written = Vec::new();
+    let topics = listing
+        .lines()
+        .filter(|l| l.starts_with('/') && l.contains("/msg/"));
+    for line in topics {
+        let cols: Vec<&str> = line.split_whitespace().collect();
+        let count: u64 = cols[2].parse().unwrap_or_else(|_| panic!("{line}"));
+        if count > 0 {
+            written.push(cols[0]);
+        }
+    }
+    written.sort_unstable();
+    assert_eq!(written, ["/stats", "/world"], "{listing}");
+}

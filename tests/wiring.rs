@@ -32,6 +32,7 @@ fn args(run_id: &str, process: &str, index: usize) -> RunArgs {
         spin_us: 0,
         restart: 0,
         resume: None,
+        no_work: false,
     }
 }
 

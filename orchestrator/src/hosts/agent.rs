@@ -402,6 +402,7 @@ fn prepare(
         mode: order.mode,
         epoch_mono_ns: order.epoch_mono_ns,
         spin_us: order.spin_us,
+        no_work: false,
         scenario_path,
         scenario: scenario.clone(),
         scope: Some(HostScope {

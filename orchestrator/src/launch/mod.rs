@@ -45,6 +45,9 @@ pub struct RunOptions {
     pub hosts: Option<crate::hosts::HostsFile>,
     /// Keep idle CPUs polling while the run goes (`--idle-poll`).
     pub idle_poll: bool,
+    /// Start every vehicle process with `--no-work` (the runtime's floor:
+    /// `shoal bench scale --floor`); the world and the recorder work.
+    pub no_work: bool,
 }
 
 /// What a run produced.
@@ -343,6 +346,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         mode: opts.mode,
         epoch_mono_ns: epoch,
         spin_us: opts.spin_us,
+        no_work: opts.no_work,
         scenario_path: scenario_path.clone(),
         scenario: scenario.clone(),
         scope: None,

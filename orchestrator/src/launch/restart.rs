@@ -38,6 +38,8 @@ pub(crate) struct Launch {
     pub(crate) mode: Mode,
     pub(crate) epoch_mono_ns: u64,
     pub(crate) spin_us: u64,
+    /// Vehicle processes are started with `--no-work`.
+    pub(crate) no_work: bool,
     pub(crate) scenario_path: PathBuf,
     pub(crate) scenario: Scenario,
     /// The share of a run spread over hosts that this host runs; `None`:
@@ -146,6 +148,9 @@ impl Launch {
         if let Some(r) = resume {
             args.push("--resume".into());
             args.push(r.display().to_string());
+        }
+        if self.no_work && !matches!(p.kind, ProcessKind::World | ProcessKind::Recorder) {
+            args.push("--no-work".into());
         }
         if p.kind == ProcessKind::Recorder {
             args.push("--out".into());

@@ -27,6 +27,8 @@ pub struct RunSettings {
     pub hosts: Option<crate::hosts::HostsFile>,
     /// Keep idle CPUs polling during each run (`--idle-poll`).
     pub idle_poll: bool,
+    /// Vehicle processes take part without working (`--no-work`).
+    pub no_work: bool,
 }
 
 /// Where the service binaries are: `bin_dir`, else the directory of the
@@ -60,6 +62,7 @@ impl RunSettings {
             spin_us: 0,
             hosts: None,
             idle_poll: false,
+            no_work: false,
         })
     }
 
@@ -75,6 +78,7 @@ impl RunSettings {
             spin_us: self.spin_us,
             hosts: self.hosts.clone(),
             idle_poll: self.idle_poll,
+            no_work: self.no_work,
         }
     }
 }

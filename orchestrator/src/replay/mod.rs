@@ -411,6 +411,7 @@ pub fn rerun(rec: &Recording, opts: &RerunOptions) -> anyhow::Result<RerunReport
         mode: Mode::Lockstep,
         epoch_mono_ns: 0,
         spin_us: 0,
+        no_work: false,
         scenario_path: scenario_path.clone(),
         scenario: scenario.clone(),
         scope: None,

@@ -11,7 +11,6 @@ fn main() -> anyhow::Result<()> {
     shoal_runtime::init_tracing();
     let scenario = shoal_scenario::Scenario::from_file(&cli.scenario)?;
     let rt = shoal_runtime::Runtime::new(&cli.run)?;
-    let task = node::CameraTask::new(&rt, &scenario)?;
-    rt.run(task)?;
+    rt.serve(|rt| node::CameraTask::new(rt, &scenario))?;
     Ok(())
 }

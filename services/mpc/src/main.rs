@@ -7,7 +7,6 @@ fn main() -> anyhow::Result<()> {
     shoal_runtime::init_tracing();
     let scenario = shoal_scenario::Scenario::from_file(&cli.scenario)?;
     let rt = shoal_runtime::Runtime::new(&cli.run)?;
-    let task = mpc::node::MpcTask::new(&rt, &scenario)?;
-    rt.run(task)?;
+    rt.serve(|rt| mpc::node::MpcTask::new(rt, &scenario))?;
     Ok(())
 }

@@ -10,7 +10,6 @@ fn main() -> anyhow::Result<()> {
     shoal_runtime::init_tracing();
     let scenario = shoal_scenario::Scenario::from_file(&cli.scenario)?;
     let rt = shoal_runtime::Runtime::new(&cli.run)?;
-    let task = planner::node::PlannerTask::new(&rt, &scenario)?;
-    rt.run(task)?;
+    rt.serve(|rt| planner::node::PlannerTask::new(rt, &scenario))?;
     Ok(())
 }

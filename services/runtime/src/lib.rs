@@ -31,7 +31,8 @@
 //! # fn main() -> anyhow::Result<()> {
 //! let args = RunArgs { run_id: "test".into(), vehicle: "L".into(), process: "idle".into(),
 //!     index: 0, mode: shoal_runtime::Mode::Lockstep, period_s: 0.1, epoch_mono_ns: 0,
-//!     processes: 1, phase_s: 0.0, spin_us: 0, restart: 0, resume: None };
+//!     processes: 1, phase_s: 0.0, spin_us: 0, restart: 0, resume: None,
+//!     no_work: false };
 //! let rt = Runtime::new(&args)?;
 //! rt.run(Idle)?;
 //! # Ok(()) }
@@ -144,6 +145,13 @@ pub struct RunArgs {
     /// `truth` sample).
     #[arg(long)]
     pub resume: Option<std::path::PathBuf>,
+    /// Take part in the run's schedule without doing the service's work:
+    /// no task and no port of its own, every step returns at once
+    /// ([`Runtime::serve`]). What is left is the runtime's own cost per
+    /// step (wake, done, statistics); `shoal bench scale --floor` runs a
+    /// group so.
+    #[arg(long)]
+    pub no_work: bool,
 }
 
 /// An error of iceoryx2 (each operation has its own type), kept whole as
@@ -317,6 +325,17 @@ pub trait Task {
     }
 }
 
+/// The task of a process started with `--no-work`: every step returns at
+/// once.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoWork;
+
+impl Task for NoWork {
+    fn step(&mut self, _ctx: &StepContext) -> Result<(), TaskError> {
+        Ok(())
+    }
+}
+
 /// What a finished run loop reports.
 #[derive(Debug, Clone, Default)]
 pub struct RunReport {
@@ -473,6 +492,23 @@ impl<S: Service> Runtime<S> {
             &format!("{}/{}", self.args.vehicle, self.args.process),
         )?;
         Subscriber::open(&node, service, limits, buffer, self.args.mode)
+    }
+
+    /// Runs the task `build` makes (see [`Runtime::run`]); with
+    /// `--no-work`, runs a task that does nothing instead and never calls
+    /// `build`, so the process opens no port of its own.
+    pub fn serve<T: Task, E: From<RuntimeError>>(
+        self,
+        build: impl FnOnce(&Self) -> Result<T, E>,
+    ) -> Result<RunReport, E>
+    where
+        iceoryx2::port::listener::Listener<S>: SynchronousMultiplexing,
+    {
+        if self.args.no_work {
+            return Ok(self.run(NoWork)?);
+        }
+        let task = build(&self)?;
+        Ok(self.run(task)?)
     }
 
     /// Runs `task` until SIGINT/SIGTERM, in the mode of the run.

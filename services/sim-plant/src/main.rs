@@ -9,7 +9,6 @@ fn main() -> anyhow::Result<()> {
     shoal_runtime::init_tracing();
     let scenario = shoal_scenario::Scenario::from_file(&cli.scenario)?;
     let rt = shoal_runtime::Runtime::new(&cli.run)?;
-    let task = node::PlantTask::new(&rt, &scenario)?;
-    rt.run(task)?;
+    rt.serve(|rt| node::PlantTask::new(rt, &scenario))?;
     Ok(())
 }

@@ -39,6 +39,12 @@
 //! table), `OUT/scale.json` (every figure) and `OUT/scale.png` /
 //! `OUT/scale.svg` (cost and real-time factor against N). Nothing fails on
 //! a figure.
+//!
+//! With `--floor` every vehicle process is started with `--no-work`: rung
+//! at each tick it is due, it reports done and publishes its statistics,
+//! but builds no task and opens no port. The world and the recorder work.
+//! The table is then what the runtime itself costs for N vehicles; the
+//! difference to a normal run is the vehicles' work and its traffic.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
@@ -97,7 +103,10 @@ const REFERENCE_N: usize = 25;
                   A size the machine cannot hold (processes, /dev/shm, open files; see `shoal \
                   check`) is skipped with the reason. Writes OUT/scale.md, OUT/scale.json and \
                   OUT/scale.png/.svg (cost and real-time factor against N); each run stays in \
-                  OUT/nNNN/.\n\nExample: shoal bench scale --vehicles 5,25 --duration 20"
+                  OUT/nNNN/. With --floor the vehicle processes take part in every tick without \
+                  working: the runtime's own cost, to set beside a normal run's.\n\nExamples: \
+                  shoal bench scale --vehicles 5,25 --duration 20\n          \
+                  shoal bench scale --vehicles 25,100 --floor"
 )]
 pub struct ScaleCmd {
     /// Group sizes to run, vehicles with the leader, comma-separated (each
@@ -123,6 +132,13 @@ pub struct ScaleCmd {
     /// groups: the pair-distance figure has N(N−1)/2 curves).
     #[arg(long)]
     pub plots: bool,
+    /// The runtime's floor: start every vehicle process with `--no-work`.
+    /// Each is still rung at every tick it is due, reports done and
+    /// publishes its statistics, but builds no task and opens no port; the
+    /// world and the recorder work as usual. Set beside a normal run, it
+    /// splits a group's cost into the runtime's and the vehicles' work.
+    #[arg(long)]
+    pub floor: bool,
     #[command(flatten)]
     pub processes: crate::cli::ProcessArgs,
 }
@@ -311,7 +327,8 @@ pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
         }
     }
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let settings = cmd.processes.settings(Mode::Lockstep, false)?;
+    let mut settings = cmd.processes.settings(Mode::Lockstep, false)?;
+    settings.no_work = cmd.floor;
     let started = Instant::now();
     let load_before = crate::launch::os::load_average();
     let mut rows: Vec<Row> = Vec::with_capacity(sizes.len());
@@ -332,7 +349,7 @@ pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
     let cpus = std::thread::available_parallelism().map_or(0, |n| n.get());
     let head = format!(
         "shoal bench scale: shape {}, seed {}, {} s simulated per run, lockstep; {cpus} CPUs, \
-         load average {} -> {}; {:.0} s in all{}",
+         load average {} -> {}; {:.0} s in all{}{}",
         cmd.shape.name(),
         cmd.seed,
         fmt_num(cmd.duration_s),
@@ -341,6 +358,11 @@ pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
         elapsed,
         if cmd.processes.idle_poll {
             "; idle CPUs poll (/dev/cpu_dma_latency held at 0)"
+        } else {
+            ""
+        },
+        if cmd.floor {
+            "; floor: the vehicle processes do no work (--no-work)"
         } else {
             ""
         }
@@ -359,6 +381,7 @@ pub fn run(cmd: ScaleCmd) -> anyhow::Result<()> {
         "seed": cmd.seed,
         "duration_s": cmd.duration_s,
         "mode": "lockstep",
+        "floor": cmd.floor,
         "cpus": cpus,
         "load_average": [load_before, load_after],
         "elapsed_s": elapsed,
