@@ -137,27 +137,33 @@ fn a_generated_group_of_100_runs_to_the_end_safe_and_every_parent_in_sight() {
     );
 }
 
-#[test]
-fn bench_scale_writes_its_table_figures_and_plot() {
-    let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("scale");
-    let o = run_shoal(&[
+/// `shoal bench scale --duration 2 --out OUT` with `args`; it must succeed.
+/// Returns what it printed.
+fn bench_scale(out: &std::path::Path, args: &[&str]) -> String {
+    let mut all = vec![
         "bench",
         "scale",
-        "--vehicles",
-        "3,6",
         "--duration",
         "2",
-        "--plots",
         "--out",
         out.to_str().unwrap(),
-    ]);
-    let said = String::from_utf8_lossy(&o.stdout);
+    ];
+    all.extend_from_slice(args);
+    let o = run_shoal(&all);
+    let said = String::from_utf8_lossy(&o.stdout).into_owned();
     assert!(
         o.status.success(),
         "{said}{}",
         String::from_utf8_lossy(&o.stderr)
     );
+    said
+}
+
+#[test]
+fn bench_scale_writes_its_table_figures_and_plot() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("scale");
+    bench_scale(&out, &["--vehicles", "3,6", "--plots"]);
     let table = std::fs::read_to_string(out.join("scale.md")).unwrap();
     for heading in [
         "processes",
@@ -196,23 +202,7 @@ fn bench_scale_writes_its_table_figures_and_plot() {
 fn bench_scale_floor_rings_every_vehicle_process_and_none_of_them_works() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("floor");
-    let o = run_shoal(&[
-        "bench",
-        "scale",
-        "--vehicles",
-        "3",
-        "--duration",
-        "2",
-        "--floor",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    let said = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{said}{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let said = bench_scale(&out, &["--vehicles", "3", "--floor"]);
     assert!(said.contains("floor"), "{said}");
     let figures: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("scale.json")).unwrap()).unwrap();
