@@ -99,6 +99,11 @@ pub fn safety(scenario: &Scenario, tracks: &Tracks) -> Safety {
         clearance_below_d_min: min_clear < scenario.safety.safe_distance_m,
         min_obstacle_clearance_m: finite(min_clear),
         obstacle_clearance_m: clearance,
+        without_truth: ts
+            .iter()
+            .filter(|t| t.t_ns.is_empty())
+            .map(|t| t.name.clone())
+            .collect(),
     }
 }
 
@@ -185,6 +190,11 @@ pub(crate) fn lost_stretches(vehicle: &str, frames: &[(u64, bool)], limit_s: f64
 pub fn verdict(s: &Summary) -> Verdict {
     let f = &s.safety;
     let mut failed = Vec::new();
+    for v in &f.without_truth {
+        failed.push(format!(
+            "{v} has no truth in the recording: its safety cannot be judged"
+        ));
+    }
     if f.collisions > 0 {
         failed.push(format!(
             "{} pair(s) of vehicles closer than the collision distance {} m",
@@ -725,6 +735,30 @@ yaw_deg = 0.0
             !v.pass && v.failed[0].starts_with("F2 without its parent"),
             "{v:?}"
         );
+    }
+
+    #[test]
+    fn a_vehicle_without_truth_fails_the_verdict_by_name() {
+        // F2's plant never published: the others' tracks are safe
+        let mut tracks = on_slots();
+        tracks[2] = track("F2", &[]);
+        let s = Summary {
+            safety: safety(&scenario(), &Tracks::new(tracks)),
+            ..Summary::default()
+        };
+        assert_eq!(s.safety.without_truth, ["F2"]);
+        let v = verdict(&s);
+        assert!(!v.pass, "{v:?}");
+        assert_eq!(
+            v.failed,
+            ["F2 has no truth in the recording: its safety cannot be judged"]
+        );
+        // with every track there, the same run passes
+        let s = Summary {
+            safety: safety(&scenario(), &Tracks::new(on_slots())),
+            ..Summary::default()
+        };
+        assert!(s.safety.without_truth.is_empty());
     }
 
     #[test]

@@ -141,6 +141,11 @@ pub struct Safety {
     /// Each vehicle's smallest distance to an obstacle, m (empty without
     /// obstacles).
     pub obstacle_clearance_m: BTreeMap<String, f64>,
+    /// Vehicles of the scenario without a single truth sample in the
+    /// recording: nothing of their safety can be judged, so the verdict
+    /// fails (a run whose vehicles never moved is not a pass).
+    #[serde(default)]
+    pub without_truth: Vec<String>,
 }
 
 /// Slot errors, from truth: `|p − (p_parent + R_parent·slot)|`.
