@@ -168,29 +168,32 @@ impl CameraTask {
         })
     }
 
-    /// The sensor: what the camera sees of the parent's beacons.
-    fn observe(&mut self) -> BeaconObservation {
-        let poses = self.world.as_ref().map_or(&[][..], WorldView::poses);
-        let me = poses[self.index];
-        let parent = poses[self.parent];
-        // Only the hulls that can come between the camera and a beacon.
+    /// The sensor: what the camera at `me` sees of the beacons of `parent`
+    /// (its pose); the other vehicles of `world` may hide them.
+    fn observe(
+        &mut self,
+        world: &WorldView,
+        me: &Isometry3<f64>,
+        parent: &Isometry3<f64>,
+    ) -> BeaconObservation {
+        // Only the hulls that can come between the camera and a beacon:
+        // the zone needs positions, a hull in it its whole pose.
         let zone = OcclusionZone::new(
-            Point3::from(self.camera.camera_in_world(&me).translation.vector),
+            Point3::from(self.camera.camera_in_world(me).translation.vector),
             Point3::from(parent.translation.vector),
             self.beacon_reach_m,
             self.hull.reach_m(),
         );
         self.occluders.clear();
-        for (i, v) in poses.iter().enumerate() {
-            if i != self.index
-                && i != self.parent
-                && zone.may_hide(&Point3::from(v.translation.vector))
-            {
-                self.occluders.push(self.hull.capsule(v));
+        for (i, p) in world.positions().enumerate() {
+            if i != self.index && i != self.parent && zone.may_hide(&p) {
+                if let Some(v) = world.pose(i) {
+                    self.occluders.push(self.hull.capsule(&v));
+                }
             }
         }
         self.camera
-            .observe(&me, &parent, &self.layout, &self.occluders, &mut self.rng)
+            .observe(me, parent, &self.layout, &self.occluders, &mut self.rng)
     }
 }
 
@@ -199,17 +202,25 @@ impl Task for CameraTask {
         if matches!(self.source, Source::Image(_)) {
             return self.step_image(ctx);
         }
-        let Some(world) = self.world.as_mut() else {
+        let Some(mut world) = self.world.take() else {
             return Ok(());
         };
+        let stepped = self.step_on(&mut world, ctx);
+        self.world = Some(world);
+        stepped
+    }
+}
+
+impl CameraTask {
+    /// A step of the point and acoustic models on `world`, the view that
+    /// this task keeps (taken out of it while the step borrows the rest).
+    fn step_on(&mut self, world: &mut WorldView, ctx: &StepContext) -> Result<(), TaskError> {
         let Some(origin) = world.refresh(ctx)? else {
             return Ok(());
         };
-        let poses = world.poses();
-        if self.index.max(self.parent) >= poses.len() {
+        let (Some(me), Some(parent)) = (world.pose(self.index), world.pose(self.parent)) else {
             return Ok(());
-        }
-        let (me, parent) = (poses[self.index], poses[self.parent]);
+        };
         if let Source::Acoustic(modem) = &mut self.source {
             let truth = me.inverse() * parent;
             let now = shoal_runtime::mono_ns();
@@ -236,7 +247,7 @@ impl Task for CameraTask {
             // A lost frame: nothing was captured, so nothing is published.
             return Ok(());
         }
-        let mut obs = self.observe();
+        let mut obs = self.observe(world, &me, &parent);
         if fault == FrameFault::Blind {
             // The beacons are there but the camera sees none of them.
             obs = BeaconObservation {
@@ -252,9 +263,7 @@ impl Task for CameraTask {
         self.publish_estimate(&est, true, ctx, origin)?;
         Ok(())
     }
-}
 
-impl CameraTask {
     /// One frame of the image model: the newest frame of this follower's
     /// own camera, read in place; blobs; which are the parent's beacons;
     /// PnP. Nothing else is read.

@@ -51,7 +51,7 @@ impl SonarTask {
 impl Task for SonarTask {
     fn step(&mut self, ctx: &StepContext) -> Result<(), TaskError> {
         let origin = self.world.refresh(ctx)?;
-        let (Some(origin), Some(&pose)) = (origin, self.world.poses().get(self.index)) else {
+        let (Some(origin), Some(pose)) = (origin, self.world.pose(self.index)) else {
             return Ok(());
         };
         // The other hulls matter only if they echo.
