@@ -377,14 +377,16 @@ impl World {
 
 sample! {
     /// A rangefinder scan: n ranges with beam angles and validity.
-    pub struct Sonar("shoal_msgs/msg/Sonar", "shoal.Sonar.v1", size = 448) {
+    pub struct Sonar("shoal_msgs/msg/Sonar", "shoal.Sonar.v2", size = 448) {
         /// Common header.
         pub header: Header,
         /// Measured range per beam, m; meaningful where `valid` is 1.
         pub ranges_m: [f64; MAX_BEAMS],
-        /// Beam azimuth in body axes (positive to starboard), rad.
+        /// Direction of the return in body axes, azimuth (positive to starboard), rad:
+        /// the echo's own for a split beam with a return, else the beam's axis.
         pub azimuth_rad: [f64; MAX_BEAMS],
-        /// Beam elevation in body axes (positive down), rad.
+        /// Direction of the return in body axes, elevation (positive down), rad (as
+        /// `azimuth_rad`).
         pub elevation_rad: [f64; MAX_BEAMS],
         /// 1 = return within range, 0 = no return.
         pub valid: [u8; MAX_BEAMS],
@@ -403,9 +405,10 @@ sample! {
 pub struct SonarScan {
     /// Measured range per beam, m (meaningful where `valid`).
     pub ranges_m: [f64; MAX_BEAMS],
-    /// Beam azimuth, rad.
+    /// Direction of the return, azimuth, rad (the echo's own for a split beam with a
+    /// return, else the beam's axis).
     pub azimuth_rad: [f64; MAX_BEAMS],
-    /// Beam elevation, rad.
+    /// Direction of the return, elevation, rad (as `azimuth_rad`).
     pub elevation_rad: [f64; MAX_BEAMS],
     /// `false` = no return within range.
     pub valid: [bool; MAX_BEAMS],

@@ -99,6 +99,12 @@ pub struct LeaderConfig {
     /// A return that came abeam keeps the side the track passed it on (default true;
     /// `false`: every return may be passed on either side, as the paper's ref. [11]).
     pub keep_abeam_side: bool,
+    /// An offset is feasible only if the way to it is (default true): moving toward it at
+    /// `offset_rate_mps` while going on at the speed command, the track keeps the
+    /// clearance from every return ahead when it comes up to it. A far gap is not aimed
+    /// for across a near wall; a leader that cannot move over in time slows (`false`: only
+    /// the offset itself is checked).
+    pub check_reach: bool,
     /// Line-of-sight lookahead for the heading, m (default 5).
     pub los_lookahead_m: f64,
     /// The virtual target is at most this far ahead of the leader's projection, m (default 2).
@@ -115,6 +121,25 @@ pub struct LeaderConfig {
     /// Dead-reckoning velocity error assumed by the position filter, 1σ per step, m/s
     /// (default 0.02: twice the DVL's noise).
     pub dead_reckoning_noise_mps: f64,
+    /// How far from its reported direction a sonar return may lie, deg (`shoal run` sets
+    /// it from `[sonar]`: 0 for rays and split beams, which report the echo's own
+    /// direction; a single-beam cone's full width). Default 0.
+    pub sonar_return_spread_deg: f64,
+    /// Half angle of the blind wedge the sonar's cones leave around the heading, deg
+    /// (`shoal run` sets it from `[sonar]`; default 6.5, the default four 7° beams at
+    /// ±10°; 0 when a cone holds the heading).
+    pub sonar_wedge_deg: f64,
+    /// Deceleration the leader plans to stop with short of what may lie in its path, m/s²
+    /// (default 0.5, about a third of what full thrust gives; 0: off). The speed command
+    /// is never above `√(2·a·(s − d_min/2 − avoid_margin))`, `s` the distance ahead the
+    /// sonar has shown clear ([`clear_ahead_m`]): the leader never goes where its sonar has
+    /// not shown clear water within its stopping distance, and slows where it cannot see
+    /// far enough.
+    pub brake_mps2: f64,
+    /// The smallest obstacle radius the leader must see in time, m (default 0.3, the
+    /// smallest `shoal gen` makes): an obstacle that size is seen through the blind wedge
+    /// around the heading only within `r / sin(sonar_wedge_deg)`.
+    pub min_obstacle_radius_m: f64,
 }
 
 impl Default for LeaderConfig {
@@ -135,6 +160,7 @@ impl Default for LeaderConfig {
             memory_cell_m: 0.5,
             side_margin_m: 1.0,
             keep_abeam_side: true,
+            check_reach: true,
             los_lookahead_m: 5.0,
             max_lead_m: 2.0,
             decel_mps2: 0.05,
@@ -142,6 +168,10 @@ impl Default for LeaderConfig {
             accel_mps2: 0.1,
             position_fix_noise_m: 0.5,
             dead_reckoning_noise_mps: 0.02,
+            sonar_return_spread_deg: 0.0,
+            sonar_wedge_deg: 6.5,
+            brake_mps2: 0.5,
+            min_obstacle_radius_m: 0.3,
         }
     }
 }
@@ -188,6 +218,13 @@ impl LeaderConfig {
         for (i, v) in self.sonar_mount_body_m.iter().enumerate() {
             check_finite(&format!("mission.sonar_mount_body_m[{i}]"), *v)?;
         }
+        check_nonneg(
+            "mission.sonar_return_spread_deg",
+            self.sonar_return_spread_deg,
+        )?;
+        check_nonneg("mission.sonar_wedge_deg", self.sonar_wedge_deg)?;
+        check_nonneg("mission.brake_mps2", self.brake_mps2)?;
+        check_pos("mission.min_obstacle_radius_m", self.min_obstacle_radius_m)?;
         Ok(())
     }
 }
@@ -251,9 +288,11 @@ pub struct LeaderPlanner {
     nav: PositionFilter,
     memory: Vec<MemPoint>,
     /// Scratch: cross-track extents `(lo, hi)` of the returns in the window.
-    window: Vec<(f64, f64)>,
+    window: Vec<(f64, f64, f64)>,
     /// Joins a mission in progress (a restarted planner): see [`Self::resume`].
     resuming: bool,
+    /// How far ahead the latest scan has shown the leader's path clear, m.
+    clear_ahead_m: f64,
 }
 
 impl LeaderPlanner {
@@ -279,6 +318,7 @@ impl LeaderPlanner {
             memory: Vec::with_capacity(LEADER_MEMORY_CAPACITY),
             window: Vec::with_capacity(LEADER_MEMORY_CAPACITY),
             resuming: false,
+            clear_ahead_m: 0.0,
             cfg: cfg.clone(),
         })
     }
@@ -293,49 +333,65 @@ impl LeaderPlanner {
         self.resuming = true;
     }
 
-    /// The wanted track offset given the remembered returns from `behind` back to
-    /// `lookahead_m` ahead along the leg (`a` its start, `tg`/`nrm` its tangent and
-    /// starboard normal) for a clearance `c`; `es` is scratch (left holding the extents).
+    /// The wanted track offset given the remembered returns from `behind` back to `ahead`
+    /// ahead along the leg (`a` its start, `tg`/`nrm` its tangent and starboard normal) for
+    /// a clearance `c`; `es` is scratch (left holding the extents).
     #[allow(clippy::too_many_arguments)]
     fn wanted_offset(
         &self,
-        es: &mut Vec<(f64, f64)>,
+        es: &mut Vec<(f64, f64, f64)>,
         pos: &Vector3<f64>,
         a: &Vector3<f64>,
         tg: &Vector3<f64>,
         nrm: &Vector3<f64>,
-        behind: f64,
+        (behind, ahead): (f64, f64),
         c: f64,
     ) -> Option<f64> {
         es.clear();
         let shadow = self.cfg.shadow_m;
         es.extend(self.memory.iter().filter_map(|m| {
             let along = (m.pos - pos).dot(tg);
-            (along >= -behind && along <= self.cfg.lookahead_m).then(|| {
+            (along >= -behind && along <= ahead).then(|| {
                 let e = (m.pos - a).dot(nrm);
                 let f = e + shadow * m.ray.dot(nrm);
                 let (lo, hi) = (e.min(f), e.max(f));
                 // what is abeam or behind can no longer be passed on its other side: it
                 // extends away from the side the track passed it on without end
                 if along > 0.0 || m.side == 0.0 || !self.cfg.keep_abeam_side {
-                    (lo, hi)
+                    (lo, hi, along)
                 } else if m.side > 0.0 {
-                    (f64::NEG_INFINITY, hi)
+                    (f64::NEG_INFINITY, hi, along)
                 } else {
-                    (lo, f64::INFINITY)
+                    (lo, f64::INFINITY, along)
                 }
             })
         }));
         es.sort_unstable_by(|x, y| x.0.total_cmp(&y.0)); // in place, no allocation
         let max_offset = self.cfg.max_offset_m;
+        // where the offset will be when the leader reaches `along`, moving toward `o` at
+        // `offset_rate_mps` while it goes on at its speed command
+        let (now, rate, v) = (self.offset, self.cfg.offset_rate_mps, self.v_cmd);
+        let at = |o: f64, along: f64| {
+            if !self.cfg.check_reach || along <= 0.0 || v <= 1e-6 {
+                return o;
+            }
+            let reach = rate * along / v;
+            now + (o - now).clamp(-reach, reach)
+        };
         let feasible = |o: f64| {
             if o.abs() > max_offset + 1e-9 {
                 return false;
             }
-            // no extent reaches within c of o
+            // no extent reaches within c of o, nor of where the offset will be when the
+            // leader comes up to it: an offset that would cut across a return ahead on
+            // the way is not one
+            let clear = |y: f64, lo: f64, hi: f64| lo >= y + c - 1e-9 || hi <= y - c + 1e-9;
             es.iter()
-                .take_while(|(lo, _)| *lo < o + c - 1e-9)
-                .all(|(_, hi)| *hi <= o - c + 1e-9)
+                .take_while(|(lo, _, _)| *lo < o + c - 1e-9)
+                .all(|&(lo, hi, _)| clear(o, lo, hi))
+                && es
+                    .iter()
+                    .all(|&(lo, hi, along)| clear(at(o, along), lo, hi))
         };
         let mut best: Option<f64> = None;
         // crossing to the other side of the track costs `side_margin_m`: a side is
@@ -368,7 +424,7 @@ impl LeaderPlanner {
         };
         consider(0.0);
         consider(cur);
-        for (lo, hi) in es.iter() {
+        for (lo, hi, _) in es.iter() {
             consider(hi + c);
             consider(lo - c);
         }
@@ -604,6 +660,17 @@ impl LeaderPlanner {
 
         // memory of returns, NED
         if let Some(scan) = &input.sonar {
+            self.clear_ahead_m = clear_ahead_m(
+                scan,
+                self.cfg.sonar_return_spread_deg,
+                self.cfg.d_min_m / 2.0 + self.cfg.avoid_margin_m,
+            );
+            if self.cfg.sonar_wedge_deg > 0.0 {
+                let wedge = self.cfg.sonar_wedge_deg.to_radians().sin();
+                self.clear_ahead_m = self
+                    .clear_ahead_m
+                    .min(self.cfg.min_obstacle_radius_m / wedge);
+            }
             for (d, az, el) in scan.returns() {
                 let p = pos + att * (self.mount + beam_vector(d, az, el));
                 let dir = att * beam_vector(1.0, az, el);
@@ -691,8 +758,10 @@ impl LeaderPlanner {
         // The window reaches `memory_behind_m` back, so the offset is kept until the
         // formation behind has passed; if nothing is clear of that whole window (a second
         // gap, offset the other way, close behind the first) only the leader's own
-        // `OWN_BEHIND_M` counts, and then only what is ahead, rather than stopping with the
-        // way ahead open.
+        // `OWN_BEHIND_M` counts; then, still with that, only the nearer half and quarter of
+        // the lookahead (the near wall is passed before the far gap is aimed for: a wall
+        // abeam is never dropped to reach a gap that is still 20 m away); and last only what
+        // is ahead, rather than stopping with the way ahead open.
         for m in &mut self.memory {
             if m.side == 0.0 && (m.pos - pos).dot(&tg) <= 0.0 {
                 let e = (m.pos - a).dot(&nrm);
@@ -701,8 +770,15 @@ impl LeaderPlanner {
         }
         let mut es = std::mem::take(&mut self.window);
         let mut best: Option<f64> = None;
-        for reach in [behind, behind.min(OWN_BEHIND_M), 0.0] {
-            best = self.wanted_offset(&mut es, &pos, &a, &tg, &nrm, reach, c);
+        let (own, ahead) = (behind.min(OWN_BEHIND_M), self.cfg.lookahead_m);
+        for window in [
+            (behind, ahead),
+            (own, ahead),
+            (own, ahead / 2.0),
+            (own, ahead / 4.0),
+            (0.0, ahead),
+        ] {
+            best = self.wanted_offset(&mut es, &pos, &a, &tg, &nrm, window, c);
             if best.is_some() {
                 break;
             }
@@ -721,12 +797,19 @@ impl LeaderPlanner {
         };
         let delta_min = es
             .iter()
-            .map(|(lo, hi)| (lo - self.offset).max(self.offset - hi).max(0.0))
+            .map(|(lo, hi, _)| (lo - self.offset).max(self.offset - hi).max(0.0))
             .fold(f64::INFINITY, f64::min);
         self.window = es;
 
         // rabbit
         let total = self.total();
+        // never faster than it can stop short of what may lie in its path
+        let seen = if self.cfg.brake_mps2 > 0.0 {
+            let room = self.clear_ahead_m - (self.cfg.d_min_m / 2.0 + self.cfg.avoid_margin_m);
+            (2.0 * self.cfg.brake_mps2 * room.max(0.0)).sqrt()
+        } else {
+            f64::INFINITY
+        };
         let v_cmd = if blocked {
             0.0
         } else {
@@ -734,6 +817,7 @@ impl LeaderPlanner {
                 .speed_mps
                 .min((2.0 * self.cfg.decel_mps2 * (total - self.rabbit).max(0.0)).sqrt())
                 .min(self.v_cmd + self.cfg.accel_mps2 * dt)
+                .min(seen)
         };
         self.v_cmd = v_cmd;
         self.rabbit = (self.rabbit + v_cmd * dt)
@@ -789,4 +873,24 @@ impl LeaderPlanner {
             track_offset_m: self.offset,
         }
     }
+}
+
+/// How far ahead `scan` shows the leader's path clear, m: the along-track distance of the
+/// nearest return that may lie within `corridor` of the heading. A return reported at
+/// range `r`, `θ` off the heading, may lie up to `spread_deg / 2` nearer the heading (a
+/// single-beam cone's return lies anywhere in it); at `ε = max(0, θ − spread/2)` it lies
+/// `r·sin ε` abeam and `r·cos ε` ahead. ∞ when no return may be in the path.
+#[must_use]
+pub fn clear_ahead_m(scan: &SonarScan, spread_deg: f64, corridor: f64) -> f64 {
+    let half = (spread_deg / 2.0).to_radians();
+    let mut clear = f64::INFINITY;
+    for (r, az, el) in scan.returns() {
+        // angle between the return's direction and the body's x axis
+        let off = (el.cos() * az.cos()).clamp(-1.0, 1.0).acos();
+        let eps = (off - half).max(0.0);
+        if eps < std::f64::consts::FRAC_PI_2 && r * eps.sin() < corridor {
+            clear = clear.min(r * eps.cos());
+        }
+    }
+    clear
 }

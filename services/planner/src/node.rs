@@ -137,6 +137,10 @@ impl<S: Service> PlannerTask<S> {
         let role = if spec.parent.is_none() {
             let mut cfg: LeaderConfig = scenario.section("mission")?;
             cfg.d_min_m = scenario.safety.safe_distance_m;
+            let sonar: sonar::SonarConfig = scenario.section("sonar")?;
+            let layout = sonar::Sonar::new(&sonar)?;
+            cfg.sonar_return_spread_deg = layout.return_spread_rad().to_degrees();
+            cfg.sonar_wedge_deg = layout.blind_wedge_rad().to_degrees();
             if scenario.method.generalised {
                 if !scenario.mission.contains_key("memory_behind_m") {
                     cfg.memory_behind_m = memory_behind_m(scenario, me, cfg.memory_behind_m);
@@ -151,6 +155,8 @@ impl<S: Service> PlannerTask<S> {
                 cfg.keep_abeam_side = false;
                 cfg.memory_cell_m = 0.0;
                 cfg.turn_radius_m = 0.0;
+                cfg.brake_mps2 = 0.0;
+                cfg.check_reach = false;
             }
             // The position filter's fix noise is the nav sensor's (sim-plant's `[nav]`).
             let nav: NavNoise = scenario.section("nav")?;

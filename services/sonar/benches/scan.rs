@@ -1,4 +1,5 @@
-//! Scan time of the default 4-beam sonar against 2 and 200 obstacles (issue 4).
+//! Scan time of the default four 25° cones, the same four as rays and a 16-beam multibeam,
+//! against 2 and 200 obstacles.
 //!
 //! `cargo bench -p sonar --bench scan -- --quick`
 #![allow(clippy::unwrap_used)] // a benchmark fixture, not library code
@@ -7,7 +8,7 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use sonar::{Obstacle, ObstacleField, Sonar, SonarConfig};
+use sonar::{Multibeam, Obstacle, ObstacleField, Sonar, SonarConfig};
 
 /// `n` obstacles of mixed kinds scattered over a 200 m × 200 m area, two of them in front
 /// of the vehicle (so every scan has returns), deterministic.
@@ -61,22 +62,47 @@ fn field(n: usize) -> ObstacleField {
 }
 
 fn bench_scan(c: &mut Criterion) {
-    let sonar = Sonar::new(&SonarConfig::default()).unwrap();
     let pose = Isometry3::from_parts(
         Translation3::new(0.0, 0.0, 0.0),
         UnitQuaternion::from_euler_angles(0.0, 0.0, 0.05),
     );
-    let mut group = c.benchmark_group("sonar_scan_4_beams");
-    for n in [2usize, 200] {
-        let f = field(n);
-        let mut rng = ChaCha8Rng::seed_from_u64(1);
-        let s = sonar.scan(&f, &pose, &[], &mut rng);
-        assert!(s.valid[..s.count].iter().any(|v| *v));
-        group.bench_with_input(BenchmarkId::new("obstacles", n), &f, |b, f| {
-            b.iter(|| sonar.scan(f, &pose, &[], &mut rng))
-        });
+    // the default (four 25° cones), the same four as rays (the earlier model), and a
+    // forward-looking multibeam of 16 beams over 120°
+    let layouts = [
+        ("sonar_scan_4_cones_25deg", SonarConfig::default()),
+        (
+            "sonar_scan_4_rays",
+            SonarConfig {
+                beam_width_deg: 0.0,
+                ..SonarConfig::default()
+            },
+        ),
+        (
+            "sonar_scan_multibeam_16x120deg",
+            SonarConfig {
+                multibeam: Some(Multibeam {
+                    beams: 16,
+                    sector_deg: 120.0,
+                    elevation_deg: 0.0,
+                }),
+                ..SonarConfig::default()
+            },
+        ),
+    ];
+    for (name, cfg) in layouts {
+        let sonar = Sonar::new(&cfg).unwrap();
+        let mut group = c.benchmark_group(name);
+        for n in [2usize, 200] {
+            let f = field(n);
+            let mut rng = ChaCha8Rng::seed_from_u64(1);
+            let s = sonar.scan(&f, &pose, &[], &mut rng);
+            assert!(s.valid[..s.count].iter().any(|v| *v));
+            group.bench_with_input(BenchmarkId::new("obstacles", n), &f, |b, f| {
+                b.iter(|| sonar.scan(f, &pose, &[], &mut rng))
+            });
+        }
+        group.finish();
     }
-    group.finish();
 
     let mut group = c.benchmark_group("obstacle_distance");
     for n in [2usize, 200] {

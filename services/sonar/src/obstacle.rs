@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use nalgebra::{Point3, Unit, Vector3};
 use parry3d_f64::bounding_volume::Aabb;
 use parry3d_f64::math::{Pose, Rot3, Vector as PVec};
-use parry3d_f64::partitioning::{Bvh, BvhBuildStrategy};
+use parry3d_f64::partitioning::{Bvh, BvhBuildStrategy, BvhLeafCost};
 use parry3d_f64::query::{PointQuery, Ray, RayCast};
 use parry3d_f64::shape::{Ball, Cuboid, Cylinder, Shape, TriMesh, TriMeshFlags};
 use serde::{Deserialize, Serialize};
@@ -218,6 +218,17 @@ impl Part {
         }
     }
 
+    /// The nearest point of the part to `p`, and whether `p` is inside it.
+    fn closest(&self, p: PVec) -> (PVec, bool) {
+        let proj = match &self.shape {
+            PartShape::Cuboid(s) => s.project_point(&self.pose, p, true),
+            PartShape::Cylinder(s) => s.project_point(&self.pose, p, true),
+            PartShape::Ball(s) => s.project_point(&self.pose, p, true),
+            PartShape::Mesh(s) => s.project_point(&self.pose, p, true),
+        };
+        (proj.point, proj.is_inside)
+    }
+
     fn aabb(&self) -> Aabb {
         match &self.shape {
             PartShape::Cuboid(s) => s.compute_aabb(&self.pose),
@@ -266,6 +277,45 @@ fn vertical_cylinder_toi(c: PVec, r: f64, h: f64, ray: &Ray, max_toi: f64) -> Op
         }
     }
     (best < max_toi).then_some(best)
+}
+
+/// A surface point inside a cone: its distance from the apex and its angle off the axis.
+#[derive(Debug, Clone, Copy)]
+struct ConeHit {
+    range: f64,
+    off_axis: f64,
+    /// Unit direction from the apex to the point.
+    dir: PVec,
+}
+
+impl BvhLeafCost for ConeHit {
+    fn cost(&self) -> f64 {
+        self.range
+    }
+}
+
+/// The angle between `v` and the unit `axis` when it is at most the cone's half angle
+/// (`cos_half` its cosine), else `None`. The apex itself (`v = 0`) is on the axis.
+pub(crate) fn off_axis(v: PVec, axis: PVec, cos_half: f64) -> Option<f64> {
+    let n = v.length();
+    if n <= 0.0 {
+        return Some(0.0);
+    }
+    let c = v.dot(axis) / n;
+    (c >= cos_half).then(|| c.clamp(-1.0, 1.0).acos())
+}
+
+/// False only when no point of `aabb` can lie inside the cone (apex `o`, unit `axis`, half
+/// angle `half`): the box's bounding sphere is tested against the cone, conservatively.
+fn aabb_may_meet_cone(aabb: &Aabb, o: PVec, axis: PVec, half: f64) -> bool {
+    let c = aabb.center() - o;
+    let r = aabb.half_extents().length();
+    let d = c.length();
+    if d <= r {
+        return true;
+    }
+    let ang = (c.dot(axis) / d).clamp(-1.0, 1.0).acos();
+    ang <= half + (r / d).asin()
 }
 
 pub(crate) fn pvec(v: &Vector3<f64>) -> PVec {
@@ -399,6 +449,80 @@ impl ObstacleField {
                     .and_then(|p| p.cast_ray(&ray, best))
             })
             .map(|(_, toi)| toi)
+    }
+
+    /// The nearest echo inside the cone of half angle `half_angle_rad` about `axis` from
+    /// each obstacle's nearest point: `(range, off-axis angle, unit direction)` in m, rad
+    /// and world axes, or `None`.
+    ///
+    /// For a convex obstacle whose nearest point to `origin` lies inside the cone, that
+    /// point is its nearest point inside the cone (exact). When it lies outside, the nearest
+    /// point inside the cone is on the cone's surface; the surface ray toward the obstacle's
+    /// nearest point gives it exactly for a sphere and an upper bound for the others, which
+    /// the caller's rays sampling the cone ([`crate::Sonar`]) tighten. A non-convex mesh
+    /// may hide a nearer point behind the first test; the rays find it to within their
+    /// spacing. Every point returned is a real surface point inside the cone.
+    pub fn cone_nearest(
+        &self,
+        origin: &Point3<f64>,
+        axis: &Unit<Vector3<f64>>,
+        half_angle_rad: f64,
+        max_m: f64,
+    ) -> Option<(f64, f64, Vector3<f64>)> {
+        if self.parts.is_empty() || max_m.is_nan() || max_m <= 0.0 {
+            return None;
+        }
+        let o = pvec(&origin.coords);
+        let a = pvec(axis);
+        let cos_half = half_angle_rad.cos();
+        self.bvh
+            .find_best(
+                max_m,
+                |node, _| {
+                    let aabb = node.aabb();
+                    if aabb_may_meet_cone(&aabb, o, a, half_angle_rad) {
+                        aabb.distance_to_local_point(o, true)
+                    } else {
+                        f64::MAX
+                    }
+                },
+                |i, _| {
+                    let part = self.parts.get(i as usize)?;
+                    let (p, inside) = part.closest(o);
+                    if inside {
+                        return Some(ConeHit {
+                            range: 0.0,
+                            off_axis: 0.0,
+                            dir: a,
+                        });
+                    }
+                    if let Some(off_axis) = off_axis(p - o, a, cos_half) {
+                        let range = p.distance(o);
+                        return Some(ConeHit {
+                            range,
+                            off_axis,
+                            dir: if range > 0.0 { (p - o) / range } else { a },
+                        });
+                    }
+                    // Outside the cone: for a convex obstacle the nearest point inside it is
+                    // on the cone's surface; the surface ray in the plane of the axis and
+                    // that nearest point finds it exactly for a sphere, and a point of it
+                    // (an upper bound) for the others.
+                    let v = p - o;
+                    let w = v - a * v.dot(a);
+                    let wl = w.length();
+                    if wl <= 0.0 {
+                        return None;
+                    }
+                    let dir = a * cos_half + w * (half_angle_rad.sin() / wl);
+                    part.cast_ray(&Ray::new(o, dir), max_m).map(|t| ConeHit {
+                        range: t,
+                        off_axis: half_angle_rad,
+                        dir,
+                    })
+                },
+            )
+            .map(|(_, h)| (h.range, h.off_axis, Vector3::new(h.dir.x, h.dir.y, h.dir.z)))
     }
 
     /// Clearance from `p` to the nearest obstacle surface, m (0 inside a solid obstacle,

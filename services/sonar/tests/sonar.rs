@@ -34,6 +34,8 @@ fn one_beam(az: f64, el: f64) -> SonarConfig {
             elevation_deg: el,
         }],
         mount_position_body_m: [0.0, 0.0, 0.0],
+        // a ray: these tests check the geometry of one direction exactly
+        beam_width_deg: 0.0,
         ..SonarConfig::default()
     }
 }
@@ -83,9 +85,9 @@ fn reads_a_wall_at_a_known_distance_within_three_sigma() {
         assert_eq!(scan.count, 4);
         for i in 0..4 {
             assert!(scan.valid[i]);
-            let az = cfg.beams[i].azimuth_deg.to_radians();
-            // the transducer sits at x = 0.8 on the nose
-            let truth = (10.0 - cfg.mount_position_body_m[0]) / az.cos();
+            // the transducer sits at x = 0.8 on the nose; the wall's nearest point inside
+            // each cone is on its edge nearest to the wall's normal
+            let truth = (10.0 - cfg.mount_position_body_m[0]) / off_normal(&cfg, i).cos();
             let err = scan.ranges_m[i] - truth;
             // a single reading: within 3σ except with probability 0.3 %, so check it on
             // the first beam of the first scans only via the mean/std below, and bound
@@ -111,8 +113,270 @@ fn reads_a_wall_at_a_known_distance_within_three_sigma() {
     }
     // a single noisy reading is within 3σ
     let scan = sonar.scan(&field, &pose, &[], &mut ChaCha8Rng::seed_from_u64(3));
-    let truth = (10.0 - 0.8) / 10f64.to_radians().cos();
-    assert!((scan.ranges_m[2] - truth).abs() < 3.0 * cfg.noise_m);
+    let truth = (10.0 - 0.8) / off_normal(&cfg, 3).cos();
+    assert!((scan.ranges_m[3] - truth).abs() < 3.0 * cfg.noise_m);
+}
+
+/// The least angle between beam `i`'s cone and straight ahead, rad.
+fn off_normal(cfg: &SonarConfig, i: usize) -> f64 {
+    (cfg.beams[i].azimuth_deg.abs() - cfg.beam_width_deg / 2.0)
+        .max(0.0)
+        .to_radians()
+}
+
+/// A vertical cylinder of radius `r` centred at (`x`, `y`), tall enough for any beam.
+fn pillar(x: f64, y: f64, r: f64) -> Obstacle {
+    Obstacle::Cylinder {
+        center_ned_m: [x, y, 0.0],
+        radius_m: r,
+        half_height_m: 20.0,
+    }
+}
+
+#[test]
+fn cones_see_a_thin_pillar_dead_ahead_that_rays_miss() {
+    // a 0.3 m pillar on the track, between the ±10° beams, seen by 25° cones
+    let field = ObstacleField::new(&[pillar(12.0, 0.0, 0.3)]).unwrap();
+    let pose = at(0.0, 0.0, 0.0, 0.0);
+    let cones = Sonar::new(&SonarConfig {
+        beam_width_deg: 25.0,
+        ..SonarConfig::default()
+    })
+    .unwrap();
+    let rays = Sonar::new(&SonarConfig {
+        beam_width_deg: 0.0,
+        ..SonarConfig::default()
+    })
+    .unwrap();
+    let c = cones.true_ranges(&field, &pose, &[]);
+    let r = rays.true_ranges(&field, &pose, &[]);
+    assert!(r.iter().all(Option::is_none), "rays {r:?}");
+    // both inner cones hold it; its nearest point is 12 − 0.3 − 0.8 m from the nose
+    for i in [1, 2] {
+        assert_relative_eq!(c[i].unwrap(), 12.0 - 0.3 - 0.8, epsilon = 1e-9);
+    }
+    assert!(c[0].is_none() && c[3].is_none(), "outer cones {c:?}");
+    // the echo sits 10° off both inner axes
+    let e = cones.true_echoes(&field, &pose, &[]);
+    assert_relative_eq!(
+        e[1].unwrap().off_axis_rad,
+        10f64.to_radians(),
+        epsilon = 1e-9
+    );
+    // the default 7° cones see the 0.7 m pillar dead ahead once its side is within
+    // their inner edges (6.5° off the heading): from 0.7 / sin 6.5° ≈ 6.2 m, where a ray
+    // at 10° sees it from 0.7 / sin 10° ≈ 4.0 m
+    let seen_from = |cfg: &SonarConfig| {
+        let sonar = Sonar::new(cfg).unwrap();
+        (0..400)
+            .map(|k| 2.0 + 0.05 * f64::from(k))
+            .filter(|d| {
+                let f = ObstacleField::new(&[pillar(0.8 + d, 0.0, 0.7)]).unwrap();
+                sonar
+                    .true_ranges(&f, &pose, &[])
+                    .iter()
+                    .any(Option::is_some)
+            })
+            .fold(0.0f64, f64::max)
+    };
+    let cone = seen_from(&SonarConfig::default());
+    let ray = seen_from(&SonarConfig {
+        beam_width_deg: 0.0,
+        ..SonarConfig::default()
+    });
+    assert!(
+        (cone - 0.7 / 6.5f64.to_radians().sin()).abs() < 0.1,
+        "cones from {cone}"
+    );
+    // that is the blind wedge the layout reports: 6.5° for 7° cones, none for 25°
+    let wedge = |w: f64| {
+        Sonar::new(&SonarConfig {
+            beam_width_deg: w,
+            ..SonarConfig::default()
+        })
+        .unwrap()
+        .blind_wedge_rad()
+        .to_degrees()
+    };
+    assert_relative_eq!(wedge(7.0), 6.5, epsilon = 1e-9);
+    assert_relative_eq!(wedge(0.0), 10.0, epsilon = 1e-9);
+    assert_relative_eq!(wedge(25.0), 0.0);
+    // a split beam's return is where it says; a single beam's anywhere in its cone
+    let single = SonarConfig {
+        split_beam: false,
+        ..SonarConfig::default()
+    };
+    assert_eq!(
+        Sonar::new(&SonarConfig::default())
+            .unwrap()
+            .return_spread_rad(),
+        0.0
+    );
+    assert_relative_eq!(
+        Sonar::new(&single).unwrap().return_spread_rad(),
+        7f64.to_radians()
+    );
+    assert!(
+        (ray - 0.7 / 10f64.to_radians().sin()).abs() < 0.1,
+        "rays from {ray}"
+    );
+}
+
+#[test]
+fn a_split_beam_says_where_in_its_cone_the_echo_came_from() {
+    // the paper's passage: a wall at y = 4; the +10° beam's nearest echo is on its outer
+    // edge, 13.5° to starboard, 4 / sin 13.5° away
+    let field = ObstacleField::new(&[Obstacle::Box {
+        center_ned_m: [20.0, 9.0, 0.0],
+        half_extents_m: [40.0, 5.0, 20.0],
+        yaw_deg: 0.0,
+    }])
+    .unwrap();
+    let mut cfg = one_beam(10.0, 0.0);
+    cfg.beam_width_deg = 7.0;
+    cfg.noise_m = 0.0;
+    cfg.angle_noise_deg = 0.0;
+    let pose = at(0.0, 0.0, 0.0, 0.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let split = Sonar::new(&cfg).unwrap().scan(&field, &pose, &[], &mut rng);
+    assert_relative_eq!(
+        split.ranges_m[0],
+        4.0 / 13.5f64.to_radians().sin(),
+        epsilon = 1e-3
+    );
+    assert_relative_eq!(split.azimuth_rad[0], 13.5f64.to_radians(), epsilon = 1e-3);
+    // placed along what it reports, the echo is on the wall
+    let y = split.ranges_m[0] * split.azimuth_rad[0].sin();
+    assert_relative_eq!(y, 4.0, epsilon = 1e-2);
+    // a single beam gives its axis: placed there the echo would be 1 m off the wall
+    cfg.split_beam = false;
+    let single = Sonar::new(&cfg).unwrap().scan(&field, &pose, &[], &mut rng);
+    assert_relative_eq!(single.azimuth_rad[0], 10f64.to_radians(), epsilon = 1e-12);
+    // the angles are noisy by `angle_noise_deg`
+    cfg.split_beam = true;
+    cfg.angle_noise_deg = 0.5;
+    let sonar = Sonar::new(&cfg).unwrap();
+    let n = 2000;
+    let errs: Vec<f64> = (0..n)
+        .map(|_| sonar.scan(&field, &pose, &[], &mut rng).azimuth_rad[0] - 13.5f64.to_radians())
+        .collect();
+    let sd = (errs.iter().map(|e| e * e).sum::<f64>() / f64::from(n)).sqrt();
+    assert!(
+        (sd.to_degrees() - 0.5).abs() < 0.05,
+        "angle noise {}",
+        sd.to_degrees()
+    );
+}
+
+#[test]
+fn a_cone_sees_nothing_outside_its_edge() {
+    let mut cfg = one_beam(0.0, 0.0);
+    cfg.beam_width_deg = 20.0;
+    let sonar = Sonar::new(&cfg).unwrap();
+    let pose = at(0.0, 0.0, 0.0, 0.0);
+    // a 0.2 m pillar centred 9° off the axis (inside the 10° half width) and one 12° off
+    // (its near side spans 12° ± 1.1°: wholly outside)
+    for (deg, inside) in [(9.0f64, true), (12.0, false)] {
+        let r = 0.2;
+        let d = 10.0;
+        let (s, c) = deg.to_radians().sin_cos();
+        // its nearest point is `d` from the apex, on the given bearing
+        let field = ObstacleField::new(&[pillar((d + r) * c, (d + r) * s, r)]).unwrap();
+        let got = sonar.true_ranges(&field, &pose, &[])[0];
+        assert_eq!(got.is_some(), inside, "{deg}°: {got:?}");
+        if let Some(g) = got {
+            assert_relative_eq!(g, d, epsilon = 1e-6);
+        }
+    }
+}
+
+#[test]
+fn dropouts_are_likelier_toward_the_edge_and_false_echoes_come_at_their_rate() {
+    let n = 4000;
+    let count = |cfg: &SonarConfig, field: &ObstacleField| {
+        let sonar = Sonar::new(cfg).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        (0..n)
+            .filter(|_| {
+                sonar
+                    .scan(field, &at(0.0, 0.0, 0.0, 0.0), &[], &mut rng)
+                    .valid[0]
+            })
+            .count() as f64
+            / n as f64
+    };
+    let mut cfg = one_beam(0.0, 0.0);
+    cfg.beam_width_deg = 20.0;
+    cfg.dropout = 0.1;
+    // on the axis: 10 % missed
+    let ahead = ObstacleField::new(&[pillar(10.3, 0.0, 0.3)]).unwrap();
+    let hit = count(&cfg, &ahead);
+    assert!((hit - 0.9).abs() < 0.03, "on axis {hit}");
+    // near the edge (9.5° of a 10° half width): gain 10^(−2.4·0.475²) ≈ 0.29, 34 % missed
+    let (s, c) = 9.5f64.to_radians().sin_cos();
+    let edge = ObstacleField::new(&[pillar(10.2 * c, 10.2 * s, 0.2)]).unwrap();
+    let gain = sonar::two_way_gain(9.5f64.to_radians(), 20f64.to_radians());
+    let hit = count(&cfg, &edge);
+    assert!(
+        (hit - (1.0 - 0.1 / gain)).abs() < 0.03,
+        "edge {hit}, gain {gain}"
+    );
+    // false echoes in open water, at their rate and within the range
+    cfg.dropout = 0.0;
+    cfg.false_echo = 0.05;
+    let empty = ObstacleField::new(&[]).unwrap();
+    let rate = count(&cfg, &empty);
+    assert!((rate - 0.05).abs() < 0.015, "false echoes {rate}");
+    let sonar = Sonar::new(&cfg).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(6);
+    for _ in 0..n {
+        let s = sonar.scan(&empty, &at(0.0, 0.0, 0.0, 0.0), &[], &mut rng);
+        assert!(s.ranges_m[0] > 0.0 && s.ranges_m[0] <= cfg.range_max_m);
+    }
+}
+
+#[test]
+fn the_edge_is_six_decibels_down_two_way() {
+    let w = 25f64.to_radians();
+    assert_relative_eq!(sonar::two_way_gain(0.0, w), 1.0);
+    assert_relative_eq!(
+        10.0 * sonar::two_way_gain(w / 2.0, w).log10(),
+        -6.0,
+        epsilon = 1e-9
+    );
+    assert_relative_eq!(sonar::two_way_gain(0.3, 0.0), 1.0);
+}
+
+#[test]
+fn a_multibeam_tiles_its_sector() {
+    let cfg = SonarConfig {
+        multibeam: Some(sonar::Multibeam {
+            beams: 12,
+            sector_deg: 120.0,
+            elevation_deg: 0.0,
+        }),
+        ..SonarConfig::default()
+    };
+    let sonar = Sonar::new(&cfg).unwrap();
+    let l = sonar.layout();
+    assert_eq!(l.count, 12);
+    assert_relative_eq!(l.azimuth_rad[0], (-55f64).to_radians(), epsilon = 1e-12);
+    assert_relative_eq!(l.azimuth_rad[11], 55f64.to_radians(), epsilon = 1e-12);
+    assert_relative_eq!(sonar.beam_width_rad(0), 10f64.to_radians(), epsilon = 1e-12);
+    // a pillar 40° to starboard is seen by the beam centred at 35° (30°-40°)... or its
+    // neighbour, whichever cone its nearest point is in
+    let (s, c) = 37f64.to_radians().sin_cos();
+    let field = ObstacleField::new(&[pillar(10.3 * c, 10.3 * s, 0.3)]).unwrap();
+    let r = sonar.true_ranges(&field, &at(0.0, 0.0, 0.0, 0.0), &[]);
+    let seen: Vec<usize> = (0..12).filter(|&i| r[i].is_some()).collect();
+    assert!(seen.contains(&9), "{seen:?}");
+    // beams and multibeam together are refused, naming the key
+    let mut both = cfg.clone();
+    both.beams.pop();
+    assert!(matches!(
+        both.validate(),
+        Err(SonarError::InvalidConfig { key, .. }) if key == "sonar.multibeam"
+    ));
 }
 
 #[test]
@@ -580,6 +844,72 @@ proptest! {
             (None, None) => {}
             // grazing rays may fall either side of the tangent
             (g, e) => prop_assert!(disc.abs() < 1e-6, "{g:?} vs {e:?}, disc {disc}"),
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// A cone's echo is never nearer than the nearest surface and no farther than its own
+    /// axis; among spheres (for which the search is exact) never farther than any ray
+    /// inside the cone (a dense fan of them).
+    #[test]
+    fn a_cone_returns_the_nearest_echo_inside_it(
+        obs in prop::collection::vec(arb_obstacle(), 1..20),
+        spheres_only in any::<bool>(),
+        o in prop::array::uniform3(-10.0..10.0f64),
+        yaw in -180.0..180.0f64,
+        width in 2.0..40.0f64,
+    ) {
+        let obs: Vec<Obstacle> = if spheres_only {
+            obs.into_iter().map(|x| match x {
+                Obstacle::Box { center_ned_m, half_extents_m, .. } => Obstacle::Sphere {
+                    center_ned_m, radius_m: half_extents_m[0],
+                },
+                Obstacle::Cylinder { center_ned_m, radius_m, .. } => Obstacle::Sphere {
+                    center_ned_m, radius_m,
+                },
+                other => other,
+            }).collect()
+        } else {
+            obs
+        };
+        let field = ObstacleField::new(&obs).unwrap();
+        let origin = Point3::from(Vector3::from(o));
+        let pose = Isometry3::from_parts(
+            Translation3::from(origin.coords),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, yaw.to_radians()),
+        );
+        let mut cfg = one_beam(0.0, 0.0);
+        cfg.beam_width_deg = width;
+        cfg.range_max_m = 60.0;
+        let sonar = Sonar::new(&cfg).unwrap();
+        let got = sonar.true_ranges(&field, &pose, &[])[0];
+        let axis = pose.rotation * Vector3::x();
+        let half = (width / 2.0).to_radians();
+        // a fan of 41 × 41 rays over the cone's square
+        let mut dense: Option<f64> = None;
+        for a in -20..=20 {
+            for b in -20..=20 {
+                let (ta, tb) = (half * a as f64 / 20.0, half * b as f64 / 20.0);
+                if ta * ta + tb * tb > half * half {
+                    continue;
+                }
+                let d = pose.rotation * Vector3::new(1.0, ta.tan(), tb.tan()).normalize();
+                if let Some(t) = field.cast_ray(&origin, &Unit::new_normalize(d), 60.0) {
+                    dense = Some(dense.map_or(t, |x: f64| x.min(t)));
+                }
+            }
+        }
+        if let Some(g) = got {
+            prop_assert!(g >= field.distance(&origin) - 1e-9);
+            if let Some(ax) = field.cast_ray(&origin, &Unit::new_normalize(axis), 60.0) {
+                prop_assert!(g <= ax + 1e-9);
+            }
+        }
+        if let (Some(d), true) = (dense, spheres_only) {
+            prop_assert!(got.is_some_and(|g| g <= d + 1e-9), "cone {got:?} vs dense {d}");
         }
     }
 }
