@@ -33,6 +33,8 @@ pub const MAX_VEHICLES: usize = 256;
 pub const MAX_BEAMS: usize = 16;
 /// Most light beacons on a parent.
 pub const MAX_BEACONS: usize = 8;
+/// Most remembered sonar returns a setpoint hands the controller's safety layer.
+pub const MAX_KEEPOUT: usize = 8;
 
 /// A sample type: a described, Pod, zero-copy struct with the common header.
 pub trait Sample:
@@ -558,7 +560,7 @@ sample! {
     /// The target for mpc, in the vehicle's level frame: origin at the vehicle
     /// now, x along the current heading projected on the horizontal, y to
     /// starboard (horizontal), z down.
-    pub struct Setpoint("shoal_msgs/msg/Setpoint", "shoal.Setpoint.v1", size = 104) {
+    pub struct Setpoint("shoal_msgs/msg/Setpoint", "shoal.Setpoint.v2", size = 352) {
         /// Common header.
         pub header: Header,
         /// Where the vehicle should be, level frame, m.
@@ -569,8 +571,86 @@ sample! {
         pub yaw_rel_rad: f64,
         /// Planner mode (see the planner crate).
         pub mode: u32,
+        /// Number of points in `keepout_m`, at most [`MAX_KEEPOUT`].
+        pub keepout_count: u32,
+        /// The remembered sonar returns nearest the vehicle, level frame, m, as
+        /// `x0, y0, z0, x1, …`: the controller's safety layer keeps clear of them.
+        pub keepout_m: [f64; 3 * MAX_KEEPOUT],
+        /// The parent's estimated position, level frame, m (followers; see `parent_valid`).
+        pub parent_position_m: [f64; 3],
+        /// The parent's estimated velocity over ground, level frame axes, m/s.
+        pub parent_velocity_mps: [f64; 3],
+        /// 1 if the parent estimate is current (the controller keeps the safe distance
+        /// from it), else 0.
+        pub parent_valid: u32,
         /// Explicit padding.
         pub _pad0: u32,
+    }
+}
+
+/// What the controller's safety layer keeps clear of, as the planner hands it over with a
+/// [`Setpoint`]: remembered sonar returns and the parent's estimate, in the vehicle's level
+/// frame (origin at the vehicle now, x along its heading on the horizontal, y starboard,
+/// z down). Only what the vehicle sensed: never ground truth.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Keepout {
+    /// Returns, m; the first `count` are meaningful.
+    pub points_m: [[f64; 3]; MAX_KEEPOUT],
+    /// Number of returns in `points_m`.
+    pub count: usize,
+    /// The parent's estimated position (m) and velocity over ground (m/s), when current.
+    pub parent: Option<([f64; 3], [f64; 3])>,
+}
+
+impl Keepout {
+    /// The returns in use.
+    pub fn points(&self) -> &[[f64; 3]] {
+        &self.points_m[..self.count.min(MAX_KEEPOUT)]
+    }
+
+    /// Adds a return; false (and nothing added) when full or not finite.
+    pub fn push(&mut self, p: [f64; 3]) -> bool {
+        if self.count >= MAX_KEEPOUT || !p.iter().all(|x| x.is_finite()) {
+            return false;
+        }
+        self.points_m[self.count] = p;
+        self.count += 1;
+        true
+    }
+
+    /// What a [`Setpoint`] carries (non-finite entries dropped, the count capped).
+    pub fn from_setpoint(s: &Setpoint) -> Self {
+        let mut k = Self::default();
+        let n = (s.keepout_count as usize).min(MAX_KEEPOUT);
+        for i in 0..n {
+            k.push([
+                s.keepout_m[3 * i],
+                s.keepout_m[3 * i + 1],
+                s.keepout_m[3 * i + 2],
+            ]);
+        }
+        let finite = s
+            .parent_position_m
+            .iter()
+            .chain(&s.parent_velocity_mps)
+            .all(|x| x.is_finite());
+        if s.parent_valid != 0 && finite {
+            k.parent = Some((s.parent_position_m, s.parent_velocity_mps));
+        }
+        k
+    }
+
+    /// Writes it into a [`Setpoint`] (everything else untouched).
+    pub fn write_to(&self, s: &mut Setpoint) {
+        s.keepout_m = [0.0; 3 * MAX_KEEPOUT];
+        for (i, p) in self.points().iter().enumerate() {
+            s.keepout_m[3 * i..3 * i + 3].copy_from_slice(p);
+        }
+        s.keepout_count = self.points().len() as u32;
+        let (p, v) = self.parent.unwrap_or_default();
+        s.parent_position_m = p;
+        s.parent_velocity_mps = v;
+        s.parent_valid = u32::from(self.parent.is_some());
     }
 }
 

@@ -489,11 +489,18 @@ pub(crate) fn chain(scenario: &Scenario, rec: &Recording) -> (Vec<ChainStage>, L
 
 /// Solve times and failures of every vehicle's MPC.
 pub(crate) fn mpc(scenario: &Scenario, rec: &Recording) -> MpcFigures {
-    let mut solve = Vec::new();
+    let (mut solve, mut guarded) = (Vec::new(), Vec::new());
     let (mut failures, mut unconstrained) = (0u64, 0u64);
+    let guarded_code = u32::from(mpc::MpcStatus::Guarded.code());
     for v in &scenario.vehicles {
         let stats = rec.samples::<MpcStats>(&ipc_types::topic(&v.name, Channel::MpcStats));
         solve.extend(stats.iter().map(|s| s.solve_ns as f64 / 1e3));
+        guarded.extend(
+            stats
+                .iter()
+                .filter(|s| s.status == guarded_code)
+                .map(|s| s.solve_ns as f64 / 1e3),
+        );
         failures += stats.last().map_or(0, |s| s.failures);
         unconstrained += stats
             .iter()
@@ -501,15 +508,19 @@ pub(crate) fn mpc(scenario: &Scenario, rec: &Recording) -> MpcFigures {
             .count() as u64;
     }
     solve.sort_by(f64::total_cmp);
+    guarded.sort_by(f64::total_cmp);
+    let times = |v: &[f64]| SolveTimes {
+        p50: pct(v, 0.5),
+        p99: pct(v, 0.99),
+        max: v.last().copied().unwrap_or(0.0),
+    };
     MpcFigures {
-        solve_us: SolveTimes {
-            p50: pct(&solve, 0.5),
-            p99: pct(&solve, 0.99),
-            max: solve.last().copied().unwrap_or(0.0),
-        },
+        solve_us: times(&solve),
         failures,
         solves: solve.len() as u64,
         unconstrained,
+        guarded: guarded.len() as u64,
+        guarded_solve_us: times(&guarded),
     }
 }
 

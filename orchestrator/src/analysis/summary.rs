@@ -270,6 +270,13 @@ pub struct MpcFigures {
     /// exact solution without clarabel, status 2); the rest went to clarabel.
     #[serde(default)]
     pub unconstrained: u64,
+    /// Of those, the steps solved with the safety layer's clearances in the QP (status 3:
+    /// something sensed would otherwise have been entered, or a bound was active near it).
+    #[serde(default)]
+    pub guarded: u64,
+    /// Solve time of the guarded steps, µs.
+    #[serde(default)]
+    pub guarded_solve_us: SolveTimes,
 }
 
 /// Solve-time percentiles, µs.

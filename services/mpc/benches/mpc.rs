@@ -2,14 +2,15 @@
 //! blocking (5 moves). First a table from the library's closed loop (a plant tracking a
 //! moving, turning target): p50 / p99 / max per step with the unconstrained-first path on
 //! and off, the share of steps it solved, and the p50 of the steps clarabel solved. Then
-//! criterion's mean on inputs that keep bounds active (every step goes to clarabel).
+//! criterion's mean on inputs that keep bounds active (every step goes to clarabel), and on
+//! the same inputs with returns on the way (every step solves the safety layer's QP).
 //!
 //! `cargo bench -p mpc --bench mpc`
 
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use mpc::{Mpc, MpcConfig, MpcInput, MpcStatus, MpcTarget};
+use mpc::{Keepout, Mpc, MpcConfig, MpcInput, MpcStatus, MpcTarget};
 use nalgebra::{UnitQuaternion, Vector3, Vector6};
 use sim_plant::model::Vehicle;
 use sim_plant::VehicleParams;
@@ -26,6 +27,7 @@ fn inputs() -> Vec<MpcInput> {
                     velocity_mps: Vector3::new(1.0, 0.2, 0.0),
                     yaw_rel_rad: 0.3 * a.sin(),
                 },
+                keepout: Keepout::default(),
             }
         })
         .collect()
@@ -103,6 +105,36 @@ fn bench_mpc(c: &mut Criterion) {
             b.iter(|| {
                 k = (k + 1) % inputs.len();
                 let r = mpc.step(black_box(&inputs[k]));
+                black_box(r.map(|o| o.tau).unwrap_or_else(|_| mpc.fallback()))
+            });
+        });
+    }
+    group.finish();
+    // The safety layer's QP: a return 2.5 m ahead on the reference, eight in all and the
+    // parent, so that every step solves the guarded QP (45 half-spaces with their slacks).
+    let mut group = c.benchmark_group("mpc_step_guarded");
+    let guarded: Vec<MpcInput> = inputs
+        .iter()
+        .map(|i| {
+            let mut keepout = Keepout::default();
+            for j in 0..8 {
+                keepout.push([2.5 + 0.3 * f64::from(j), -3.0 + f64::from(j), 0.0]);
+            }
+            keepout.parent = Some(([6.0, 4.0, 0.0], [1.0, 0.0, 0.0]));
+            MpcInput { keepout, ..*i }
+        })
+        .collect();
+    for horizon in [10usize, 20, 30] {
+        let cfg = MpcConfig {
+            horizon,
+            ..MpcConfig::default()
+        };
+        let mut mpc = Mpc::new(&cfg, &vehicle).unwrap_or_else(|e| unreachable!("{e}"));
+        let mut k = 0usize;
+        group.bench_with_input(BenchmarkId::from_parameter(horizon), &horizon, |b, _| {
+            b.iter(|| {
+                k = (k + 1) % guarded.len();
+                let r = mpc.step(black_box(&guarded[k]));
                 black_box(r.map(|o| o.tau).unwrap_or_else(|_| mpc.fallback()))
             });
         });

@@ -8,7 +8,7 @@ use nalgebra::{Rotation3, UnitQuaternion, Vector3, Vector6};
 use sim_plant::nav::{NavConfig, NavSensor};
 use sim_plant::{Plant, PlantConfig, PlantError, PlantState};
 
-use crate::{Mpc, MpcConfig, MpcError, MpcInput, MpcOutput, MpcTarget};
+use crate::{Keepout, Mpc, MpcConfig, MpcError, MpcInput, MpcOutput, MpcTarget};
 
 /// The target in NED at time `t`: position, velocity, heading. 1 m/s straight ahead for
 /// 30 s, then a starboard turn on a 40 m circle, descending at 0.1 m/s.
@@ -123,6 +123,7 @@ pub fn run(
             attitude: m.attitude,
             nu,
             target,
+            keepout: Keepout::default(),
         };
         let t0 = Instant::now();
         let result = mpc.step(&input);

@@ -8,7 +8,7 @@
 //!
 //! ```
 //! use nalgebra::{UnitQuaternion, Vector3, Vector6};
-//! use mpc::{Mpc, MpcConfig, MpcInput, MpcTarget};
+//! use mpc::{Keepout, Mpc, MpcConfig, MpcInput, MpcTarget};
 //! use sim_plant::{model::Vehicle, VehicleParams};
 //!
 //! let vehicle = Vehicle::new(&VehicleParams::default())?;
@@ -22,6 +22,8 @@
 //!         velocity_mps: Vector3::new(1.0, 0.0, 0.0),
 //!         yaw_rel_rad: 0.0,
 //!     },
+//!     // nothing sensed nearby: the safety layer stays out of the way
+//!     keepout: Keepout::default(),
 //! };
 //! let out = match mpc.step(&input) {
 //!     Ok(out) => out.tau,
@@ -102,6 +104,7 @@
 pub mod closed_loop;
 pub mod node;
 pub mod prediction;
+pub mod safety;
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
@@ -112,6 +115,7 @@ use serde::{Deserialize, Serialize};
 use sim_plant::model::Vehicle;
 
 use prediction::{InputMat, StateVec, NU};
+pub use safety::{Keepout, MAX_KEEPOUT};
 
 /// Why the solver did not return a usable solution.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -228,6 +232,19 @@ pub struct MpcConfig {
     /// convex, so a feasible unconstrained minimiser is its exact solution. Clarabel solves
     /// the steps where some bound is active. Default true; false always calls clarabel.
     pub unconstrained_first: bool,
+    /// The safety layer ([`safety`]): keep every predicted position `d_min_m/2 +
+    /// safety_margin_m` from the returns the planner hands over and `d_min_m +
+    /// safety_margin_m` from the parent's estimate (default true).
+    pub safety: bool,
+    /// The safe distance `D_min`, m (default 2; `shoal run` sets it from `[safety]`).
+    pub d_min_m: f64,
+    /// Clearance kept beyond `D_min/2` from a return and `D_min` from the parent, m
+    /// (default 0.25).
+    pub safety_margin_m: f64,
+    /// Cost of a clearance given up, per m and step (and 10× that per m²; default 1e5):
+    /// far above the tracking errors planners make, so a clearance yields only when no
+    /// input can keep it.
+    pub slack_weight: f64,
 }
 
 impl Default for MpcConfig {
@@ -245,6 +262,10 @@ impl Default for MpcConfig {
             fallback_decay: 0.8,
             max_iter: 50,
             unconstrained_first: true,
+            safety: true,
+            d_min_m: 2.0,
+            safety_margin_m: 0.25,
+            slack_weight: 1e5,
         }
     }
 }
@@ -287,6 +308,19 @@ impl MpcConfig {
         }
         if self.max_iter == 0 {
             return Err(bad("max_iter", ">= 1", self.max_iter));
+        }
+        if !(self.d_min_m.is_finite() && self.d_min_m > 0.0) {
+            return Err(bad("d_min_m", "finite and > 0", self.d_min_m));
+        }
+        if !(self.safety_margin_m.is_finite() && self.safety_margin_m >= 0.0) {
+            return Err(bad(
+                "safety_margin_m",
+                "finite and >= 0",
+                self.safety_margin_m,
+            ));
+        }
+        if !(self.slack_weight.is_finite() && self.slack_weight > 0.0) {
+            return Err(bad("slack_weight", "finite and > 0", self.slack_weight));
         }
         Ok(())
     }
@@ -331,7 +365,7 @@ pub struct MpcTarget {
 }
 
 /// One control step's input: the vehicle's own navigation and the setpoint.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MpcInput {
     /// AHRS attitude body→NED (only roll and pitch are used).
     pub attitude: UnitQuaternion<f64>,
@@ -339,6 +373,8 @@ pub struct MpcInput {
     pub nu: Vector6<f64>,
     /// The setpoint.
     pub target: MpcTarget,
+    /// What the safety layer keeps clear of (level frame; empty: nothing).
+    pub keepout: Keepout,
 }
 
 /// How the QP ended when it gave a usable answer.
@@ -351,17 +387,21 @@ pub enum MpcStatus {
     /// The unconstrained minimiser already satisfies every bound, so it is the QP's exact
     /// solution (see [`MpcConfig::unconstrained_first`]); clarabel was not called.
     Unconstrained,
+    /// Solved with the safety layer's clearances in the QP (some clearance would otherwise
+    /// have been entered, or a bound was active near something to keep clear of).
+    Guarded,
 }
 
 impl MpcStatus {
-    /// Stable numeric code for `mpc_stats`: 0 solved, 1 almost solved (failures: see
-    /// [`SolverFailure::code`]).
+    /// Stable numeric code for `mpc_stats`: 0 solved, 1 almost solved, 2 unconstrained,
+    /// 3 guarded (failures: see [`SolverFailure::code`]).
     #[must_use]
     pub fn code(self) -> u8 {
         match self {
             Self::Solved => 0,
             Self::AlmostSolved => 1,
             Self::Unconstrained => 2,
+            Self::Guarded => 3,
         }
     }
 }
@@ -407,6 +447,15 @@ pub struct Mpc {
     /// steps so that no step allocates) and its right-hand side / solution.
     dense: DMatrix<f64>,
     x_free: DVector<f64>,
+    /// Whether `x_free` holds this step's unconstrained minimiser (the factorisation held).
+    x_free_ok: bool,
+    /// The safety layer (none when `safety` is off).
+    safety: Option<safety::Safety>,
+    /// For each step `j` of the horizon, its index among the safety layer's constrained
+    /// steps.
+    constrained: Vec<Option<usize>>,
+    /// Scratch for the safety layer's solution.
+    guarded_x: Vec<f64>,
 }
 
 impl std::fmt::Debug for Mpc {
@@ -522,6 +571,10 @@ impl Mpc {
             b_vals: vec![0.0; 2 * n],
             dense: DMatrix::zeros(n, n),
             x_free: DVector::zeros(n),
+            x_free_ok: false,
+            safety: None,
+            constrained: vec![None; config.horizon + 1],
+            guarded_x: Vec::with_capacity(n),
         };
         // Equilibration is computed once, at construction: build the solver on the data of
         // a representative problem (at rest, level, target 1 m ahead) so its scaling fits.
@@ -533,8 +586,26 @@ impl Mpc {
                 velocity_mps: Vector3::zeros(),
                 yaw_rel_rad: 0.0,
             },
+            keepout: Keepout::default(),
         };
         mpc.assemble(&nominal)?;
+        if config.safety {
+            let ends = mpc.block_end.clone();
+            for (jj, &j) in ends.iter().enumerate() {
+                mpc.constrained[j] = Some(jj);
+            }
+            mpc.safety = Some(safety::Safety::new(
+                config,
+                &ends,
+                (&colptr, &rowval),
+                safety::QpData {
+                    p: &mpc.p_vals,
+                    q: &mpc.q_vals,
+                    b: &mpc.b_vals,
+                },
+                |p, q, a, b| Self::build_solver(config, p, q, a, b),
+            )?);
+        }
         let p_mat = CscMatrix::new(n, n, colptr, rowval, mpc.p_vals.clone());
         mpc.solver = Self::build_solver(config, &p_mat, &mpc.q_vals, &a_mat, &mpc.b_vals)?;
         Ok(mpc)
@@ -637,6 +708,15 @@ impl Mpc {
         let mut constant = 0.0;
         for j in 1..=horizon {
             free = ad * free + cd;
+            // the safety layer's constrained steps keep their position rows (copies only:
+            // nothing below changes)
+            let guard_step = self.constrained[j].filter(|_| self.safety.is_some());
+            if let (Some(jj), Some(s)) = (guard_step, self.safety.as_mut()) {
+                s.free_pos[jj] = free.fixed_rows::<3>(0).into_owned();
+                for g in &mut s.sens[jj * nb..(jj + 1) * nb] {
+                    g.fill(0.0);
+                }
+            }
             #[allow(clippy::cast_precision_loss)]
             let t = j as f64 * h;
             let p_ref = tgt.position_m + tgt.velocity_mps * t;
@@ -674,6 +754,9 @@ impl Mpc {
                 self.grad[b] += sb.tr_mul(&we0);
                 self.s_blk[b] = sb.transpose();
                 self.ws_blk[b] = wsb;
+                if let (Some(jj), Some(s)) = (guard_step, self.safety.as_mut()) {
+                    s.sens[jj * nb + b] = sb.fixed_rows::<3>(0).into_owned();
+                }
             }
             for b in 0..active {
                 for c in b..active {
@@ -737,13 +820,81 @@ impl Mpc {
         {
             return Err(MpcError::NonFiniteInput("target"));
         }
+        // the safety layer takes part only when there is something to keep clear of; the
+        // reference then stops short of what it would run into
+        let guard = match self.safety.as_mut() {
+            Some(s) => s.load(&input.keepout),
+            None => false,
+        };
+        let held;
+        let input = match self.safety.as_ref().filter(|_| guard) {
+            Some(s) => {
+                let horizon_s = self.cfg.step_s * self.cfg.horizon as f64;
+                held = MpcInput {
+                    target: s.hold_short(&input.target, horizon_s),
+                    ..*input
+                };
+                &held
+            }
+            None => input,
+        };
         let constant = self.assemble(input)?;
+        self.x_free_ok = false;
+        let (h, umax) = (self.cfg.step_s, self.umax);
         if self.cfg.unconstrained_first && self.solve_unconstrained() {
-            let x = std::mem::replace(&mut self.x_free, DVector::zeros(0));
-            let out = self.finish(x.as_slice(), constant, 0, MpcStatus::Unconstrained);
-            self.x_free = x;
-            return out;
+            let clear = !guard
+                || self
+                    .safety
+                    .as_mut()
+                    .is_some_and(|s| s.keeps_clear(self.x_free.as_slice(), h, &umax));
+            if clear {
+                let x = std::mem::replace(&mut self.x_free, DVector::zeros(0));
+                let out = self.finish(x.as_slice(), constant, 0, MpcStatus::Unconstrained);
+                self.x_free = x;
+                return out;
+            }
         }
+        // Bounds alone first (clarabel on the small QP) unless the unconstrained path
+        // already runs into something; its answer stands when it keeps every clearance.
+        let free_clear = !guard
+            || (self.x_free_ok
+                && self
+                    .safety
+                    .as_mut()
+                    .is_some_and(|s| s.keeps_clear(self.x_free.as_slice(), h, &umax)));
+        if free_clear {
+            let (iterations, status) = self.solve_bounds()?;
+            let x = std::mem::take(&mut self.solver.solution.x);
+            let clear = !guard
+                || self
+                    .safety
+                    .as_mut()
+                    .is_some_and(|s| s.keeps_clear(&x, h, &umax));
+            let out = clear.then(|| self.finish(&x, constant, iterations, status));
+            self.solver.solution.x = x;
+            if let Some(out) = out {
+                return out;
+            }
+        }
+        let Some(s) = self.safety.as_mut() else {
+            return Err(MpcError::NonFiniteSolution);
+        };
+        let lin = self.x_free_ok.then_some(self.x_free.as_slice());
+        let mut x = std::mem::take(&mut self.guarded_x);
+        let qp = safety::QpData {
+            p: &self.p_vals,
+            q: &self.q_vals,
+            b: &self.b_vals,
+        };
+        let solved = s.solve(qp, lin, h, &umax, &mut x);
+        let out =
+            solved.and_then(|(iterations, status)| self.finish(&x, constant, iterations, status));
+        self.guarded_x = x;
+        out
+    }
+
+    /// Clarabel on the QP with its bounds only; the solution stays in `solver.solution.x`.
+    fn solve_bounds(&mut self) -> Result<(u32, MpcStatus), MpcError> {
         let setup = |e: clarabel::solver::DataUpdateError| MpcError::Setup(e.to_string());
         self.solver.update_P(&self.p_vals).map_err(setup)?;
         self.solver.update_q(&self.q_vals).map_err(setup)?;
@@ -760,11 +911,7 @@ impl Mpc {
                 })
             }
         };
-        let iterations = sol.iterations;
-        let x = std::mem::take(&mut self.solver.solution.x);
-        let out = self.finish(&x, constant, iterations, status);
-        self.solver.solution.x = x;
-        out
+        Ok((sol.iterations, status))
     }
 
     /// The minimiser of `½v̂ᵀPv̂ + qᵀv̂` into `x_free` (Cholesky of `P`, in place); true when
@@ -787,6 +934,7 @@ impl Mpc {
             Some(chol) => {
                 chol.solve_mut(&mut self.x_free);
                 self.dense = chol.unpack();
+                self.x_free_ok = self.x_free.iter().all(|x| x.is_finite());
                 self.x_free
                     .iter()
                     .enumerate()
@@ -909,6 +1057,7 @@ mod tests {
                 velocity_mps: Vector3::new(0.9, 0.3, -0.1),
                 yaw_rel_rad: 0.4,
             },
+            keepout: Keepout::default(),
         };
         let constant = mpc.assemble(&input).unwrap();
         let n = NU * mpc.n_blocks;
@@ -1055,6 +1204,7 @@ mod tests {
                     velocity_mps: Vector3::new(vx, vy, 0.0),
                     yaw_rel_rad: yaw_ref,
                 },
+                keepout: Keepout::default(),
             };
             let cfg = MpcConfig::default();
             let mut run = Mpc::new(&cfg, &vehicle).unwrap();
@@ -1110,6 +1260,7 @@ mod tests {
                     velocity_mps: Vector3::new(1.0, 0.0, 0.0),
                     yaw_rel_rad: yaw,
                 },
+                keepout: Keepout::default(),
             };
             let cfg = MpcConfig::default();
             let mut fast = Mpc::new(&cfg, &vehicle).unwrap();

@@ -1,6 +1,6 @@
 //! Wiring of the predictive controller to its channels.
 
-use crate::{Mpc, MpcConfig, MpcInput, MpcTarget};
+use crate::{Keepout, Mpc, MpcConfig, MpcInput, MpcTarget};
 use ipc_types::{Channel, MpcStats, Nav, Sample, Setpoint, Thrust};
 use nalgebra::{Vector3, Vector6};
 use shoal_runtime::convert::quat;
@@ -38,6 +38,12 @@ impl<S: Service> MpcTask<S> {
         // the bounds are the plant's saturation.
         cfg.step_s = 1.0 / scenario.rates.mpc_hz;
         cfg.thrust_max = plant.thrust_max;
+        // The safety layer keeps the run's safe distance; it is beyond the paper, so the
+        // method as published flies without it.
+        cfg.d_min_m = scenario.safety.safe_distance_m;
+        if !scenario.method.generalised {
+            cfg.safety = false;
+        }
         let vehicle = Vehicle::new(&plant.vehicle)?;
         let run = &rt.args().run_id;
         let lim = ChannelLimits::vehicle();
@@ -81,6 +87,7 @@ impl<S: Service> Task for MpcTask<S> {
                 velocity_mps: Vector3::from(sp.velocity_mps),
                 yaw_rel_rad: sp.yaw_rel_rad,
             },
+            keepout: Keepout::from_setpoint(&sp),
         };
         let t0 = shoal_runtime::mono_ns();
         let result = self.mpc.step(&input);

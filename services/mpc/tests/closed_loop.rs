@@ -5,7 +5,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use mpc::closed_loop::{self, target_at, wrap};
-use mpc::{Mpc, MpcConfig, MpcError, MpcInput, MpcStatus, MpcTarget};
+use mpc::{Keepout, Mpc, MpcConfig, MpcError, MpcInput, MpcStatus, MpcTarget};
 use nalgebra::{UnitQuaternion, Vector3, Vector6};
 
 struct Run {
@@ -189,6 +189,7 @@ fn fallback_is_finite_and_decays() {
             velocity_mps: Vector3::new(1.0, 0.0, 0.0),
             yaw_rel_rad: 0.5,
         },
+        keepout: Keepout::default(),
     };
     for _ in 0..5 {
         mpc.step(&input).unwrap();
@@ -220,6 +221,7 @@ fn non_finite_input_is_an_error_and_changes_nothing() {
             velocity_mps: Vector3::zeros(),
             yaw_rel_rad: 0.0,
         },
+        keepout: Keepout::default(),
     };
     mpc.step(&good).unwrap();
     let before = *mpc.last_tau();

@@ -5,6 +5,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
 use crate::frames::{from_level, to_level, wrap, yaw_of};
+use crate::keepout;
 use crate::observer::{FixOutcome, ObserverParams, ParentObserver};
 use crate::shift::{beam_vector, Displacement, Shift, SlotFilter};
 use crate::types::{
@@ -809,6 +810,19 @@ impl FollowerPlanner {
             velocity_mps: to_level(yaw_own, &target_vel),
             yaw_rel_rad: wrap(target_yaw - yaw_own),
         };
+        // the safety layer's points: remembered returns, and the parent while its estimate
+        // is current (fresh, or followed on its prediction)
+        let odo = self.odo;
+        let mut keepout = keepout::select(|| {
+            self.memory
+                .iter()
+                .map(|m| to_level(yaw_own, &(m.pos - odo)))
+        });
+        if fresh || predicting {
+            let p = to_level(yaw_own, &(self.observer.position() - odo));
+            let v = to_level(yaw_own, &self.observer.velocity());
+            keepout.parent = Some(([p.x, p.y, p.z], [v.x, v.y, v.z]));
+        }
         let state = PlannerState {
             mode,
             slot_nominal_m: self.slot.disp.slot,
@@ -822,7 +836,11 @@ impl FollowerPlanner {
             waypoint_distance_m: 0.0,
             track_offset_m: 0.0,
         };
-        Ok(PlannerOutput { target, state })
+        Ok(PlannerOutput {
+            target,
+            keepout,
+            state,
+        })
     }
 
     /// The target heading `yaw`, turned toward the parent just enough that every beacon

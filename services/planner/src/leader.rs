@@ -43,6 +43,7 @@ use nalgebra::{UnitQuaternion, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
 use crate::frames::{to_level, wrap, yaw_of};
+use crate::keepout;
 use crate::nav_filter::PositionFilter;
 use crate::shift::beam_vector;
 use crate::types::{
@@ -720,6 +721,7 @@ impl LeaderPlanner {
         if self.path.len() < 2 && self.done.is_none() {
             self.done = Some((last_wp, yaw));
         }
+        let keepout = keepout::select(|| self.memory.iter().map(|m| to_level(yaw, &(m.pos - pos))));
         if let Some((hold, hold_yaw)) = self.done {
             return Ok(PlannerOutput {
                 target: Target {
@@ -727,6 +729,7 @@ impl LeaderPlanner {
                     velocity_mps: Vector3::zeros(),
                     yaw_rel_rad: wrap(hold_yaw - yaw),
                 },
+                keepout,
                 state: self.state(Mode::MissionDone, f64::INFINITY, (hold - pos).norm(), false),
             });
         }
@@ -849,6 +852,7 @@ impl LeaderPlanner {
                 velocity_mps: to_level(yaw, &vel_ned),
                 yaw_rel_rad: wrap(chi - yaw),
             },
+            keepout,
             state: self.state(mode, delta_min, wp_dist, delta_min < c),
         })
     }

@@ -53,6 +53,7 @@
 pub mod follower;
 pub mod formation;
 pub mod frames;
+pub mod keepout;
 pub mod leader;
 pub mod nav_filter;
 pub mod node;

@@ -269,6 +269,7 @@ impl<S: Service> Task for PlannerTask<S> {
         sp.velocity_mps = arr(&out.target.velocity_mps);
         sp.yaw_rel_rad = out.target.yaw_rel_rad;
         sp.mode = out.state.mode.into();
+        out.keepout.write_to(&mut sp);
         self.setpoint_out.publish(sp, ctx, origin)?;
 
         let s = &out.state;

@@ -149,6 +149,8 @@ pub struct PlannerState {
 pub struct PlannerOutput {
     /// The setpoint for mpc.
     pub target: Target,
+    /// What the controller's safety layer keeps clear of (level frame, like `target`).
+    pub keepout: ipc_types::Keepout,
     /// Internal state, for recording and plots.
     pub state: PlannerState,
 }

@@ -219,7 +219,7 @@ fn invalid(key: impl Into<String>, reason: impl Into<String>) -> ScenarioError {
 /// settings, with where from: a scenario that sets one is refused, so that
 /// nothing a user writes is silently replaced. (The service libraries keep
 /// them as parameters, for programs that build a config directly.)
-pub const DERIVED_KEYS: [(&str, &str, &str); 14] = [
+pub const DERIVED_KEYS: [(&str, &str, &str); 15] = [
     ("follower", "view_half_angle_deg", "[camera] fov_deg / 2"),
     (
         "follower",
@@ -256,6 +256,7 @@ pub const DERIVED_KEYS: [(&str, &str, &str); 14] = [
         "the camera-pose rate, [rates] camera_hz",
     ),
     ("sonar", "rate_hz", "the sonar rate, [rates] sonar_hz"),
+    ("mpc", "d_min_m", "[safety] safe_distance_m"),
     (
         "mission",
         "sonar_return_spread_deg",
