@@ -1,5 +1,5 @@
-//! Scan time of the default four 25° cones, the same four as rays and a 16-beam multibeam,
-//! against 2 and 200 obstacles.
+//! Scan time of the default four 7° cones, the same four as 25° cones and as rays, and a
+//! 16-beam multibeam, against 2 and 200 obstacles.
 //!
 //! `cargo bench -p sonar --bench scan -- --quick`
 #![allow(clippy::unwrap_used)] // a benchmark fixture, not library code
@@ -66,10 +66,18 @@ fn bench_scan(c: &mut Criterion) {
         Translation3::new(0.0, 0.0, 0.0),
         UnitQuaternion::from_euler_angles(0.0, 0.0, 0.05),
     );
-    // the default (four 25° cones), the same four as rays (the earlier model), and a
-    // forward-looking multibeam of 16 beams over 120°
+    // the default (four 7° split beams), the same four as 25° single beams (the Ping2's)
+    // and as rays (the earlier model), and a forward-looking multibeam of 16 beams over 120°
     let layouts = [
-        ("sonar_scan_4_cones_25deg", SonarConfig::default()),
+        ("sonar_scan_4_cones_7deg", SonarConfig::default()),
+        (
+            "sonar_scan_4_cones_25deg",
+            SonarConfig {
+                beam_width_deg: 25.0,
+                split_beam: false,
+                ..SonarConfig::default()
+            },
+        ),
         (
             "sonar_scan_4_rays",
             SonarConfig {
