@@ -93,26 +93,9 @@ fn bench_mpc(c: &mut Criterion) {
     closed_loop_table();
     let vehicle = Vehicle::new(&VehicleParams::default()).unwrap_or_else(|e| unreachable!("{e}"));
     let inputs = inputs();
-    let mut group = c.benchmark_group("mpc_step");
-    for horizon in [10usize, 20, 30] {
-        let cfg = MpcConfig {
-            horizon,
-            ..MpcConfig::default()
-        };
-        let mut mpc = Mpc::new(&cfg, &vehicle).unwrap_or_else(|e| unreachable!("{e}"));
-        let mut k = 0usize;
-        group.bench_with_input(BenchmarkId::from_parameter(horizon), &horizon, |b, _| {
-            b.iter(|| {
-                k = (k + 1) % inputs.len();
-                let r = mpc.step(black_box(&inputs[k]));
-                black_box(r.map(|o| o.tau).unwrap_or_else(|_| mpc.fallback()))
-            });
-        });
-    }
-    group.finish();
+    bench_steps(c, "mpc_step", &vehicle, &inputs);
     // The safety layer's QP: a return 2.5 m ahead on the reference, eight in all and the
     // parent, so that every step solves the guarded QP (45 half-spaces with their slacks).
-    let mut group = c.benchmark_group("mpc_step_guarded");
     let guarded: Vec<MpcInput> = inputs
         .iter()
         .map(|i| {
@@ -124,17 +107,23 @@ fn bench_mpc(c: &mut Criterion) {
             MpcInput { keepout, ..*i }
         })
         .collect();
+    bench_steps(c, "mpc_step_guarded", &vehicle, &guarded);
+}
+
+/// Criterion's time of a step on `inputs` in turn, at P = 10, 20, 30.
+fn bench_steps(c: &mut Criterion, name: &str, vehicle: &Vehicle, inputs: &[MpcInput]) {
+    let mut group = c.benchmark_group(name);
     for horizon in [10usize, 20, 30] {
         let cfg = MpcConfig {
             horizon,
             ..MpcConfig::default()
         };
-        let mut mpc = Mpc::new(&cfg, &vehicle).unwrap_or_else(|e| unreachable!("{e}"));
+        let mut mpc = Mpc::new(&cfg, vehicle).unwrap_or_else(|e| unreachable!("{e}"));
         let mut k = 0usize;
         group.bench_with_input(BenchmarkId::from_parameter(horizon), &horizon, |b, _| {
             b.iter(|| {
-                k = (k + 1) % guarded.len();
-                let r = mpc.step(black_box(&guarded[k]));
+                k = (k + 1) % inputs.len();
+                let r = mpc.step(black_box(&inputs[k]));
                 black_box(r.map(|o| o.tau).unwrap_or_else(|_| mpc.fallback()))
             });
         });

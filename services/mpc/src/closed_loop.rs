@@ -5,7 +5,7 @@
 use std::time::{Duration, Instant};
 
 use nalgebra::{Rotation3, UnitQuaternion, Vector3, Vector6};
-use sim_plant::nav::{NavConfig, NavSensor};
+use sim_plant::nav::{NavConfig, NavMeasurement, NavSensor};
 use sim_plant::{Plant, PlantConfig, PlantError, PlantState};
 
 use crate::{Keepout, Mpc, MpcConfig, MpcError, MpcInput, MpcOutput, MpcTarget};
@@ -55,6 +55,15 @@ impl Noise {
         let u = (self.0 >> 11) as f64 / (1u64 << 53) as f64;
         (u - 0.5) * 12f64.sqrt() * sigma
     }
+}
+
+/// The body velocity `[u v w p q r]` a nav measurement gives the controller.
+#[must_use]
+pub fn nu_of(m: &NavMeasurement) -> Vector6<f64> {
+    let mut nu = Vector6::zeros();
+    nu.fixed_rows_mut::<3>(0).copy_from(&m.velocity_body_mps);
+    nu.fixed_rows_mut::<3>(3).copy_from(&m.rates_body_radps);
+    nu
 }
 
 /// One control step of the loop, as the callback sees it.
@@ -116,12 +125,9 @@ pub fn run(
             velocity_mps: to_level * v_t,
             yaw_rel_rad: wrap(psi_t - psi),
         };
-        let mut nu = Vector6::zeros();
-        nu.fixed_rows_mut::<3>(0).copy_from(&m.velocity_body_mps);
-        nu.fixed_rows_mut::<3>(3).copy_from(&m.rates_body_radps);
         let input = MpcInput {
             attitude: m.attitude,
-            nu,
+            nu: nu_of(&m),
             target,
             keepout: Keepout::default(),
         };

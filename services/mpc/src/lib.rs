@@ -507,6 +507,25 @@ fn add_tr_mul(h: &mut Matrix6<f64>, st: &InputRowMat, ws: &InputMat) {
     }
 }
 
+/// Iterations and status of a clarabel solve (`solved`: what a full-accuracy solution is
+/// called), or the failure.
+fn outcome(
+    sol: &clarabel::solver::DefaultSolution<f64>,
+    solved: MpcStatus,
+) -> Result<(u32, MpcStatus), MpcError> {
+    let status = match sol.status {
+        SolverStatus::Solved => solved,
+        SolverStatus::AlmostSolved => MpcStatus::AlmostSolved,
+        other => {
+            return Err(MpcError::Solver {
+                status: SolverFailure::from_status(other),
+                iterations: sol.iterations,
+            })
+        }
+    };
+    Ok((sol.iterations, status))
+}
+
 fn all_finite<'a>(it: impl IntoIterator<Item = &'a f64>) -> bool {
     it.into_iter().all(|x| x.is_finite())
 }
@@ -900,18 +919,7 @@ impl Mpc {
         self.solver.update_q(&self.q_vals).map_err(setup)?;
         self.solver.update_b(&self.b_vals).map_err(setup)?;
         self.solver.solve();
-        let sol = &self.solver.solution;
-        let status = match sol.status {
-            SolverStatus::Solved => MpcStatus::Solved,
-            SolverStatus::AlmostSolved => MpcStatus::AlmostSolved,
-            other => {
-                return Err(MpcError::Solver {
-                    status: SolverFailure::from_status(other),
-                    iterations: sol.iterations,
-                })
-            }
-        };
-        Ok((sol.iterations, status))
+        outcome(&self.solver.solution, MpcStatus::Solved)
     }
 
     /// The minimiser of `½v̂ᵀPv̂ + qᵀv̂` into `x_free` (Cholesky of `P`, in place); true when

@@ -44,13 +44,13 @@
 //! stands if its answer keeps every clearance too. Only the rest solves this larger QP.
 
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{DefaultSolver, IPSolver, SolverStatus};
+use clarabel::solver::{DefaultSolver, IPSolver};
 use nalgebra::{SMatrix, Vector3};
 
 pub use ipc_types::{Keepout, MAX_KEEPOUT};
 
 use crate::prediction::NU;
-use crate::{MpcConfig, MpcError, MpcStatus, SolverFailure};
+use crate::{MpcConfig, MpcError, MpcStatus};
 
 /// Position rows of one block's prediction sensitivity `S_j^b` (3 × 6).
 pub(crate) type PosSens = SMatrix<f64, 3, NU>;
@@ -429,19 +429,10 @@ impl Safety {
         self.solver.update_b(&self.b_vals).map_err(setup)?;
         self.solver.solve();
         let sol = &self.solver.solution;
-        let status = match sol.status {
-            SolverStatus::Solved => MpcStatus::Guarded,
-            SolverStatus::AlmostSolved => MpcStatus::AlmostSolved,
-            other => {
-                return Err(MpcError::Solver {
-                    status: SolverFailure::from_status(other),
-                    iterations: sol.iterations,
-                })
-            }
-        };
+        let (iterations, status) = crate::outcome(sol, MpcStatus::Guarded)?;
         out.clear();
         out.extend_from_slice(&sol.x[..n_u]);
-        Ok((sol.iterations, status))
+        Ok((iterations, status))
     }
 }
 

@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use mpc::{closed_loop, Keepout, Mpc, MpcConfig, MpcInput, MpcStatus, MpcTarget};
-use nalgebra::{Rotation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use sim_plant::nav::{NavConfig, NavSensor};
 use sim_plant::{Plant, PlantConfig, PlantState};
 
@@ -79,12 +79,9 @@ fn drive_in(
             let (p, v) = (to_level * (p - here), to_level * v);
             keepout.parent = Some(([p.x, p.y, p.z], [v.x, v.y, v.z]));
         }
-        let mut nu = Vector6::zeros();
-        nu.fixed_rows_mut::<3>(0).copy_from(&m.velocity_body_mps);
-        nu.fixed_rows_mut::<3>(3).copy_from(&m.rates_body_radps);
         let input = MpcInput {
             attitude: m.attitude,
-            nu,
+            nu: closed_loop::nu_of(&m),
             target: MpcTarget {
                 position_m: to_level * (goal - here),
                 velocity_mps: to_level * Vector3::new(1.0, 0.0, 0.0),
