@@ -729,7 +729,8 @@ impl Mpc {
             free = ad * free + cd;
             // the safety layer's constrained steps keep their position rows (copies only:
             // nothing below changes)
-            let guard_step = self.constrained[j].filter(|_| self.safety.is_some());
+            // (`constrained` is empty without the layer)
+            let guard_step = self.constrained[j];
             if let (Some(jj), Some(s)) = (guard_step, self.safety.as_mut()) {
                 s.free_pos[jj] = free.fixed_rows::<3>(0).into_owned();
                 for g in &mut s.sens[jj * nb..(jj + 1) * nb] {
@@ -860,27 +861,22 @@ impl Mpc {
         let constant = self.assemble(input)?;
         self.x_free_ok = false;
         let (h, umax) = (self.cfg.step_s, self.umax);
-        if self.cfg.unconstrained_first && self.solve_unconstrained() {
-            let clear = !guard
-                || self
-                    .safety
-                    .as_mut()
-                    .is_some_and(|s| s.keeps_clear(self.x_free.as_slice(), h, &umax));
-            if clear {
-                let x = std::mem::replace(&mut self.x_free, DVector::zeros(0));
-                let out = self.finish(x.as_slice(), constant, 0, MpcStatus::Unconstrained);
-                self.x_free = x;
-                return out;
-            }
-        }
-        // Bounds alone first (clarabel on the small QP) unless the unconstrained path
-        // already runs into something; its answer stands when it keeps every clearance.
+        let within_bounds = self.cfg.unconstrained_first && self.solve_unconstrained();
+        // whether the unconstrained path keeps every clearance (checked once)
         let free_clear = !guard
             || (self.x_free_ok
                 && self
                     .safety
                     .as_mut()
                     .is_some_and(|s| s.keeps_clear(self.x_free.as_slice(), h, &umax)));
+        if within_bounds && free_clear {
+            let x = std::mem::replace(&mut self.x_free, DVector::zeros(0));
+            let out = self.finish(x.as_slice(), constant, 0, MpcStatus::Unconstrained);
+            self.x_free = x;
+            return out;
+        }
+        // Bounds alone next (clarabel on the small QP) unless the unconstrained path
+        // already runs into something; its answer stands when it keeps every clearance.
         if free_clear {
             let (iterations, status) = self.solve_bounds()?;
             let x = std::mem::take(&mut self.solver.solution.x);
@@ -895,8 +891,9 @@ impl Mpc {
                 return out;
             }
         }
+        // only a guarded step gets here (without points the bounds-only answer stood)
         let Some(s) = self.safety.as_mut() else {
-            return Err(MpcError::NonFiniteSolution);
+            return Err(MpcError::Setup("no safety layer for a guarded step".into()));
         };
         let lin = self.x_free_ok.then_some(self.x_free.as_slice());
         let mut x = std::mem::take(&mut self.guarded_x);

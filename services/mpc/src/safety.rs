@@ -207,10 +207,10 @@ impl Safety {
     /// The target with its reference (`position + velocity·t` over `horizon_s`, reached
     /// from the vehicle now along a straight line) stopped short of the first clearance it
     /// would enter (the straight way to the target counting only where it runs through a
-    /// point, within [`THROUGH`] of its clearance): the vehicle is then asked to slow and hold where no safe motion toward
-    /// the target exists, instead of being pulled into the constraints (which, soft and
-    /// linearised, would let it creep in). The target itself when the reference stays
-    /// clear.
+    /// point, within [`THROUGH`] of its clearance): the vehicle is then asked to slow and
+    /// hold where no safe motion toward the target exists, instead of being pulled into the
+    /// constraints (which, soft and linearised, would let it creep in). The target itself
+    /// when the reference stays clear.
     pub(crate) fn hold_short(&self, target: &crate::MpcTarget, horizon_s: f64) -> crate::MpcTarget {
         let p = target.position_m;
         let v = target.velocity_mps;
@@ -369,10 +369,12 @@ impl Safety {
         // pushed the other way (the path runs between two returns of a wall across it):
         // then along the line of sight from the vehicle now, so that it stops short instead
         // of being pushed sideways both ways at once.
+        let mut crossing = [false; N_POINTS];
         let mut away: [Option<Vector3<f64>>; N_POINTS] = [None; N_POINTS];
         for k in (0..N_POINTS).filter(|&k| self.active[k]) {
             let (d, sep) = self.approach(k, h);
-            if d < self.points[k].clearance && d > 1e-6 {
+            crossing[k] = d < self.points[k].clearance;
+            if crossing[k] && d > 1e-6 {
                 away[k] = Some(sep / d);
             }
         }
@@ -389,7 +391,7 @@ impl Safety {
             }
         }
         for k in 0..N_POINTS {
-            let crossing = self.active[k] && self.crosses(k, h);
+            let crossing = crossing[k];
             for jj in 0..n_j {
                 let row = k * n_j + jj;
                 let (coef, rhs) = if self.active[k] {

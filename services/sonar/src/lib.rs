@@ -7,8 +7,9 @@
 //! inside it, found with [`parry3d_f64`] against the scenario's static obstacles
 //! ([`ObstacleField`], behind a bounding-volume hierarchy) and, optionally, the other
 //! vehicles' hulls (capsules), plus Gaussian range noise, and dropouts (likelier toward
-//! the cone's edge, where the echo is weaker) and false echoes where configured. It is one of the two crates allowed to read ground
-//! truth (the vehicle poses), and only to simulate what the sensor physically measures.
+//! the cone's edge, where the echo is weaker) and false echoes where configured. It is one
+//! of the two crates allowed to read ground truth (the vehicle poses), and only to simulate
+//! what the sensor physically measures.
 //!
 //! Pure library: state in, values out; no clock, no I/O. parry speaks glam; the nalgebra ↔
 //! glam conversion happens here, at the sensor boundary, and nowhere else.

@@ -205,16 +205,9 @@ impl Part {
     }
 
     fn distance(&self, p: PVec) -> f64 {
-        let proj = match &self.shape {
-            PartShape::Cuboid(s) => s.project_point(&self.pose, p, true),
-            PartShape::Cylinder(s) => s.project_point(&self.pose, p, true),
-            PartShape::Ball(s) => s.project_point(&self.pose, p, true),
-            PartShape::Mesh(s) => s.project_point(&self.pose, p, true),
-        };
-        if proj.is_inside {
-            0.0
-        } else {
-            proj.point.distance(p)
+        match self.closest(p) {
+            (_, true) => 0.0,
+            (q, false) => q.distance(p),
         }
     }
 
