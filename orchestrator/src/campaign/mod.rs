@@ -11,6 +11,12 @@
 //! when [`judge`] finds nothing: the summary's safety verdict, the slot
 //! error settled after the course and the leader at its goal.
 //!
+//! With `--space` every course is [`Family::Composed`] and draws its own
+//! formation too ([`draw_formation`]): a shape, 5 to 50 vehicles, points or
+//! images; the report adds tables per kind of feature, per group size and per
+//! camera. `--first-course-seed` starts the course seeds elsewhere, so that a
+//! method tuned on one range is judged on another it has never run.
+//!
 //! Running the same command again resumes: a run whose directory holds a
 //! `summary.json` is not run again. Ctrl-C stops the runs under way (their
 //! rows say `interrupted`) and writes the report of those finished.
@@ -66,12 +72,18 @@ pub struct CampaignOptions {
     pub published: bool,
     /// Camera model of every course.
     pub camera: shoal_scenario::CameraModel,
+    /// Sample the whole space: composed courses, each with a formation drawn
+    /// from its course seed ([`draw_formation`]); `shape`, `vehicles`,
+    /// `camera` and `families` are then not used.
+    pub space: bool,
+    /// The first course seed (course `i` has seed `first_course_seed + i div F`).
+    pub first_course_seed: u64,
 }
 
 /// One run of the campaign.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Job {
-    /// `<family><course seed>-<shape>-<N>-s<seed>`.
+    /// `<family><course seed>-<shape>-<N>[-img]-s<seed>`.
     pub name: String,
     /// Family.
     pub family: Family,
@@ -79,6 +91,70 @@ pub struct Job {
     pub course_seed: u64,
     /// Noise seed.
     pub seed: u64,
+    /// Formation shape.
+    pub shape: Shape,
+    /// Vehicles.
+    pub vehicles: usize,
+    /// Camera model.
+    pub camera: shoal_scenario::CameraModel,
+}
+
+/// Share of `--space` courses run with rendered images (groups of 5-9).
+pub const SPACE_IMAGE_SHARE: f64 = 0.2;
+/// Share of `--space` courses with 15-50 vehicles (point cameras).
+pub const SPACE_LARGE_SHARE: f64 = 0.35;
+
+/// The formation of `--space` course `course_seed`: with images
+/// ([`SPACE_IMAGE_SHARE`]) 5-9 vehicles (a renderer per follower at a
+/// 0.01 s tick costs the most per vehicle); otherwise 15-50 vehicles
+/// ([`SPACE_LARGE_SHARE`]) or 5-14; the paper's five on a fifth of the small
+/// groups, else triangle, V, column or grid.
+pub fn draw_formation(course_seed: u64) -> (Shape, usize, shoal_scenario::CameraModel) {
+    let mut z = course_seed ^ 0x464F_524D_4154;
+    let mut unit = || {
+        // SplitMix64
+        z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut x = z;
+        x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((x ^ (x >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let images = unit() < SPACE_IMAGE_SHARE;
+    let large = !images && unit() < SPACE_LARGE_SHARE / (1.0 - SPACE_IMAGE_SHARE);
+    let camera = if images {
+        shoal_scenario::CameraModel::Image
+    } else {
+        shoal_scenario::CameraModel::Point
+    };
+    let (lo, hi) = match (images, large) {
+        (true, _) => (5, 9),
+        (false, true) => (15, 50),
+        (false, false) => (5, 14),
+    };
+    let n = lo + ((hi - lo + 1) as f64 * unit()) as usize;
+    if !large && unit() < 0.2 {
+        return (Shape::Paper, 5, camera);
+    }
+    let shapes = [Shape::Triangle, Shape::V, Shape::Column, Shape::Grid];
+    let shape = shapes[((shapes.len() as f64) * unit()) as usize % shapes.len()];
+    (shape, n.min(hi), camera)
+}
+
+/// A run's name.
+fn job_name(
+    family: Family,
+    course_seed: u64,
+    shape: Shape,
+    n: usize,
+    cam: shoal_scenario::CameraModel,
+    seed: u64,
+) -> String {
+    let img = if cam == shoal_scenario::CameraModel::Image {
+        "-img"
+    } else {
+        ""
+    };
+    format!("{family}{course_seed}-{}-{n}{img}-s{seed}", shape.name())
 }
 
 /// How a run ended.
@@ -124,6 +200,18 @@ pub struct RunRow {
     pub goal_error_m: Option<f64>,
     /// Wall-clock time of the run, s.
     pub wall_s: f64,
+    /// Formation shape.
+    #[serde(default)]
+    pub shape: String,
+    /// Vehicles.
+    #[serde(default)]
+    pub vehicles: usize,
+    /// Camera model (`point` or `image`).
+    #[serde(default)]
+    pub camera: String,
+    /// The kinds of feature on a composed course.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub features: Vec<gen::Feature>,
 }
 
 /// Why a campaign cannot start.
@@ -148,24 +236,31 @@ pub fn jobs(o: &CampaignOptions) -> Result<Vec<Job>, CampaignError> {
     if o.seeds == 0 {
         return Err(CampaignError::NoSeeds);
     }
-    if o.families.is_empty() {
+    if o.families.is_empty() && !o.space {
         return Err(CampaignError::NoFamilies);
     }
     let f = o.families.len();
     let mut out = Vec::new();
     for i in 0..o.courses {
-        let family = o.families[i % f];
-        let course_seed = (i / f) as u64;
+        let (family, course_seed, (shape, vehicles, camera)) = if o.space {
+            let cs = o.first_course_seed + i as u64;
+            (Family::Composed, cs, draw_formation(cs))
+        } else {
+            (
+                o.families[i % f],
+                o.first_course_seed + (i / f) as u64,
+                (o.shape, o.vehicles, o.camera),
+            )
+        };
         for seed in 0..o.seeds {
             out.push(Job {
-                name: format!(
-                    "{family}{course_seed}-{}-{}-s{seed}",
-                    o.shape.name(),
-                    o.vehicles
-                ),
+                name: job_name(family, course_seed, shape, vehicles, camera, seed),
                 family,
                 course_seed,
                 seed,
+                shape,
+                vehicles,
+                camera,
             });
         }
     }
@@ -195,7 +290,7 @@ pub fn judge(s: &Summary) -> Vec<String> {
 }
 
 /// The row of a finished run from its summary.
-pub fn row(job: &Job, dir: &Path, s: &Summary) -> RunRow {
+pub fn row(job: &Job, dir: &Path, s: &Summary, features: &[gen::Feature]) -> RunRow {
     let failed = judge(s);
     let status = if failed.is_empty() {
         Status::Pass
@@ -214,6 +309,7 @@ pub fn row(job: &Job, dir: &Path, s: &Summary) -> RunRow {
         final_rms_m: s.formation.slot_error_rms_final_m,
         goal_error_m: s.mission.leader_goal_error_m,
         wall_s: s.wall_time_s,
+        features: features.to_vec(),
         ..unfinished(job, dir, status, failed)
     }
 }
@@ -234,27 +330,44 @@ fn unfinished(job: &Job, dir: &Path, status: Status, failed: Vec<String>) -> Run
         final_rms_m: None,
         goal_error_m: None,
         wall_s: 0.0,
+        shape: job.shape.name().to_string(),
+        vehicles: job.vehicles,
+        camera: match job.camera {
+            shoal_scenario::CameraModel::Image => "image",
+            _ => "point",
+        }
+        .to_string(),
+        features: Vec::new(),
     }
 }
 
-/// Writes the scenario of every job into `OUT/courses/` (each checked as
-/// `shoal check` would).
-fn write_courses(o: &CampaignOptions, jobs: &[Job]) -> anyhow::Result<()> {
+/// Writes the scenario of every job into `OUT/courses/` (each planned as
+/// `shoal gen` would, so `shoal check` accepts it); returns each job's
+/// kinds of feature.
+fn write_courses(o: &CampaignOptions, jobs: &[Job]) -> anyhow::Result<Vec<Vec<gen::Feature>>> {
     let dir = o.out.join("courses");
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let mut features = Vec::with_capacity(jobs.len());
     for j in jobs {
-        let text = gen::generate(&GenOptions {
-            vehicles: o.vehicles,
-            shape: o.shape,
+        let plan = gen::plan(&GenOptions {
+            vehicles: j.vehicles,
+            shape: j.shape,
             spacing_m: o.spacing_m,
             seed: j.seed,
             course: Some(j.family),
             course_seed: Some(j.course_seed),
             name: Some(j.name.clone()),
-            camera: o.camera,
+            camera: j.camera,
             ..GenOptions::default()
         })
         .with_context(|| format!("generating {}", j.name))?;
+        features.push(
+            plan.course
+                .as_ref()
+                .map(|c| c.features.clone())
+                .unwrap_or_default(),
+        );
+        let text = gen::text(&plan).with_context(|| format!("generating {}", j.name))?;
         let path = dir.join(format!("{}.toml", j.name));
         let text = if o.published {
             format!("{text}\n[method]\ngeneralised = false\n")
@@ -263,14 +376,14 @@ fn write_courses(o: &CampaignOptions, jobs: &[Job]) -> anyhow::Result<()> {
         };
         std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
     }
-    Ok(())
+    Ok(features)
 }
 
 /// Runs the campaign and writes its report into `o.out`.
 pub fn run(o: &CampaignOptions) -> anyhow::Result<Report> {
     use iceoryx2_bb_posix::signal::SignalHandler;
     let jobs = jobs(o)?;
-    write_courses(o, &jobs)?;
+    let features = write_courses(o, &jobs)?;
     // installs the SIGINT/SIGTERM handler
     let _ = SignalHandler::termination_requested();
     let bar = if o.quiet {
@@ -292,7 +405,7 @@ pub fn run(o: &CampaignOptions) -> anyhow::Result<Report> {
         match Summary::read(&dir.join("summary.json")) {
             // A run stopped part-way is run again.
             Ok(s) if !s.partial => {
-                rows[i] = Some(row(j, &dir, &s));
+                rows[i] = Some(row(j, &dir, &s, &features[i]));
                 bar.inc(1);
             }
             _ => todo.push(i),
@@ -362,7 +475,7 @@ pub fn run(o: &CampaignOptions) -> anyhow::Result<Report> {
         let job = &jobs[i];
         let dir = o.out.join("runs").join(&job.name);
         let r = match Summary::read(&dir.join("summary.json")) {
-            Ok(s) if !s.partial => row(job, &dir, &s),
+            Ok(s) if !s.partial => row(job, &dir, &s, &features[i]),
             _ if stopping => unfinished(job, &dir, Status::Interrupted, vec!["interrupted".into()]),
             other => unfinished(
                 job,
@@ -425,6 +538,8 @@ mod tests {
             quiet: true,
             published: false,
             camera: shoal_scenario::CameraModel::Point,
+            space: false,
+            first_course_seed: 0,
         }
     }
 
@@ -502,13 +617,25 @@ mod tests {
         let j = jobs(&o).unwrap();
         let mut rows: Vec<RunRow> = j
             .iter()
-            .map(|j| row(j, &PathBuf::from(format!("/c/runs/{}", j.name)), &good()))
+            .map(|j| {
+                row(
+                    j,
+                    &PathBuf::from(format!("/c/runs/{}", j.name)),
+                    &good(),
+                    &[],
+                )
+            })
             .collect();
         let mut bad = good();
         bad.safety.min_obstacle_clearance_m = Some(0.4);
         bad.verdict.failed = vec!["obstacle clearance 0.40 m below half the safe distance".into()];
         bad.perception.parent_lost = vec![Stretch::default()];
-        rows[3] = row(&j[3], &PathBuf::from("/c/runs/offset0-paper-5-s1"), &bad);
+        rows[3] = row(
+            &j[3],
+            &PathBuf::from("/c/runs/offset0-paper-5-s1"),
+            &bad,
+            &[],
+        );
         rows[1].status = Status::Interrupted;
         let r = Report::new(&o, rows);
         assert_eq!(r.overall.runs, 3);

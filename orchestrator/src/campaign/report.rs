@@ -62,6 +62,15 @@ impl Tally {
     }
 }
 
+/// Group sizes of the report's table per size: name, least, most vehicles.
+const SIZES: [(&str, usize, usize); 5] = [
+    ("2-4 vehicles", 2, 4),
+    ("5-9 vehicles", 5, 9),
+    ("10-14 vehicles", 10, 14),
+    ("15-29 vehicles", 15, 29),
+    ("30-50+ vehicles", 30, usize::MAX),
+];
+
 /// Everything the campaign found.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Report {
@@ -77,6 +86,16 @@ pub struct Report {
     pub by_family: Vec<Tally>,
     /// Over every run.
     pub overall: Tally,
+    /// Per kind of feature (composed courses): the runs whose course holds one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub by_feature: Vec<Tally>,
+    /// Per group size (`5-9`, `10-14`, `15-29`, `30-50` vehicles, when more
+    /// than one size ran).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub by_size: Vec<Tally>,
+    /// Per camera model (when both ran).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub by_camera: Vec<Tally>,
     /// Runs stopped by Ctrl-C.
     pub interrupted: usize,
     /// Every run, in order.
@@ -91,13 +110,46 @@ impl Report {
             .iter()
             .map(|f| Tally::of(f.name(), rows.iter().filter(|r| r.family == f.name())))
             .collect();
+        let by_feature = crate::gen::Feature::ALL
+            .iter()
+            .filter(|k| rows.iter().any(|r| r.features.contains(k)))
+            .map(|k| Tally::of(k.name(), rows.iter().filter(|r| r.features.contains(k))))
+            .collect();
+        let mut by_size: Vec<Tally> = SIZES
+            .iter()
+            .filter(|(_, lo, hi)| rows.iter().any(|r| (*lo..=*hi).contains(&r.vehicles)))
+            .map(|(name, lo, hi)| {
+                Tally::of(
+                    name,
+                    rows.iter().filter(|r| (*lo..=*hi).contains(&r.vehicles)),
+                )
+            })
+            .collect();
+        if by_size.len() < 2 {
+            by_size.clear();
+        }
+        let mut by_camera: Vec<Tally> = ["point", "image"]
+            .iter()
+            .filter(|c| rows.iter().any(|r| r.camera == **c))
+            .map(|c| Tally::of(c, rows.iter().filter(|r| r.camera == *c)))
+            .collect();
+        if by_camera.len() < 2 {
+            by_camera.clear();
+        }
         Self {
-            shape: o.shape.name().to_string(),
+            shape: if o.space {
+                "any".to_string()
+            } else {
+                o.shape.name().to_string()
+            },
             vehicles: o.vehicles,
             courses: o.courses,
             seeds: o.seeds,
             by_family,
             overall: Tally::of("all", rows.iter()),
+            by_feature,
+            by_size,
+            by_camera,
             interrupted: rows
                 .iter()
                 .filter(|r| r.status == Status::Interrupted)
@@ -117,12 +169,19 @@ impl Report {
     /// failing runs with their paths and what failed.
     pub fn markdown(&self) -> String {
         let mut t = String::new();
-        let na = fmt_or_na;
-        let _ = writeln!(
-            t,
-            "# Campaign: {} of {} vehicles, {} courses × {} seeds\n",
-            self.shape, self.vehicles, self.courses, self.seeds
-        );
+        if self.shape == "any" {
+            let _ = writeln!(
+                t,
+                "# Campaign over the space: {} composed courses × {} seeds, each with its own formation\n",
+                self.courses, self.seeds
+            );
+        } else {
+            let _ = writeln!(
+                t,
+                "# Campaign: {} of {} vehicles, {} courses × {} seeds\n",
+                self.shape, self.vehicles, self.courses, self.seeds
+            );
+        }
         let _ = writeln!(
             t,
             "A run passes with no collision of either kind, min pair ≥ the safe distance, \
@@ -130,27 +189,20 @@ impl Report {
              RMS over the last 30 s < {FINAL_RMS_LIMIT_M} m and the leader within \
              {GOAL_LIMIT_M} m of its goal.\n"
         );
-        let _ = writeln!(
-            t,
-            "| family | runs | pass | pass rate | worst min pair (m) | worst clearance (m) | \
-             worst parent gap (s) | worst final RMS (m) | worst goal error (m) |"
+        table(
+            &mut t,
+            "family",
+            self.by_family.iter().chain(std::iter::once(&self.overall)),
         );
-        let _ = writeln!(t, "|---|---|---|---|---|---|---|---|---|");
-        for f in self.by_family.iter().chain(std::iter::once(&self.overall)) {
-            let _ = writeln!(
-                t,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
-                f.family,
-                f.runs,
-                f.passed,
-                f.pass_rate
-                    .map_or("n/a".to_string(), |r| format!("{:.1} %", 100.0 * r)),
-                na(f.worst_min_pair_m, 2),
-                na(f.worst_clearance_m, 2),
-                na(f.worst_parent_gap_s, 1),
-                na(f.worst_final_rms_m, 2),
-                na(f.worst_goal_error_m, 2),
-            );
+        for (label, tallies) in [
+            ("kind of feature", &self.by_feature),
+            ("group size", &self.by_size),
+            ("camera", &self.by_camera),
+        ] {
+            if !tallies.is_empty() {
+                let _ = writeln!(t);
+                table(&mut t, label, tallies.iter());
+            }
         }
         if self.interrupted > 0 {
             let _ = writeln!(
@@ -169,6 +221,33 @@ impl Report {
             }
         }
         t
+    }
+}
+
+/// A Markdown table of `tallies`, the first column headed `label`.
+fn table<'a>(t: &mut String, label: &str, tallies: impl Iterator<Item = &'a Tally>) {
+    let na = fmt_or_na;
+    let _ = writeln!(
+        t,
+        "| {label} | runs | pass | pass rate | worst min pair (m) | worst clearance (m) | \
+         worst parent gap (s) | worst final RMS (m) | worst goal error (m) |"
+    );
+    let _ = writeln!(t, "|---|---|---|---|---|---|---|---|---|");
+    for f in tallies {
+        let _ = writeln!(
+            t,
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            f.family,
+            f.runs,
+            f.passed,
+            f.pass_rate
+                .map_or("n/a".to_string(), |r| format!("{:.1} %", 100.0 * r)),
+            na(f.worst_min_pair_m, 2),
+            na(f.worst_clearance_m, 2),
+            na(f.worst_parent_gap_s, 1),
+            na(f.worst_final_rms_m, 2),
+            na(f.worst_goal_error_m, 2),
+        );
     }
 }
 

@@ -62,6 +62,17 @@ pub struct CampaignCmd {
     /// Camera model of every course (as `shoal gen --camera`).
     #[arg(long, value_enum, default_value_t = crate::cli::gen::CameraArg::Point)]
     camera: crate::cli::gen::CameraArg,
+    /// Sample the whole space: every course composed (2-5 features: gaps from the
+    /// formation's narrowest to its full width, turns up to 180°, S-bends, cylinder and
+    /// sphere fields, walls at any angle, depth changes, currents over any part), each
+    /// with a formation drawn from its course seed (5-50 vehicles of any shape, a fifth
+    /// with images). --shape, --vehicles, --camera and --families are then not used.
+    #[arg(long, conflicts_with_all = ["shape", "vehicles", "camera", "families"])]
+    space: bool,
+    /// The first course seed: run courses K, K+1, ... (so a method tuned on one range
+    /// can be judged on another).
+    #[arg(long, default_value_t = 0)]
+    first_course_seed: u64,
 }
 
 /// Runs the campaign, prints its table; exit status 3 if a run failed.
@@ -75,7 +86,11 @@ pub fn run(cmd: CampaignCmd) -> anyhow::Result<()> {
         cmd.families.clone()
     };
     let out = cmd.out.clone().unwrap_or_else(|| {
-        PathBuf::from("runs").join(format!("campaign-{}-{vehicles}", cmd.shape.name()))
+        PathBuf::from("runs").join(if cmd.space {
+            format!("campaign-space-{}", cmd.first_course_seed)
+        } else {
+            format!("campaign-{}-{vehicles}", cmd.shape.name())
+        })
     });
     let jobs = cmd.jobs.unwrap_or_else(|| {
         std::thread::available_parallelism()
@@ -97,6 +112,8 @@ pub fn run(cmd: CampaignCmd) -> anyhow::Result<()> {
         quiet: cmd.quiet,
         published: cmd.published,
         camera: cmd.camera.into(),
+        space: cmd.space,
+        first_course_seed: cmd.first_course_seed,
     };
     let report = campaign::run(&o)?;
     print!("{}", report.markdown());

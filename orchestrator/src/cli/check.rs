@@ -26,6 +26,30 @@ pub fn run(path: Option<PathBuf>, resolved: bool, hosts: Option<PathBuf>) -> any
         s.vehicles.len(),
         s.processes().len()
     );
+    let slots: Vec<planner::formation::FollowerSlot> = s
+        .vehicles
+        .iter()
+        .filter_map(|v| {
+            Some(planner::formation::FollowerSlot {
+                name: v.name.clone(),
+                parent: v.parent.clone()?,
+                slot_in_parent_m: v.slot_m?,
+            })
+        })
+        .collect();
+    if let (Some(leader), false) = (
+        s.vehicles.iter().find(|v| v.parent.is_none()),
+        slots.is_empty(),
+    ) {
+        let d_min = s.safety.safe_distance_m;
+        if let Ok((narrowest, full)) =
+            planner::formation::narrowest_gap_m(&leader.name, &slots, d_min)
+        {
+            println!(
+                "  formation {full:.1} m wide; narrowest gap it passes at the safe distance ({d_min} m): {narrowest:.1} m"
+            );
+        }
+    }
     for line in preflight::advice(&s) {
         println!("warning: {line}");
     }

@@ -1,6 +1,6 @@
 //! `shoal gen`: a generated large-group scenario on stdout.
 
-use crate::gen::{generate, Family, GenOptions, ObstacleCount, Shape};
+use crate::gen::{generate, Family, Feature, GenOptions, ObstacleCount, Shape};
 
 /// Arguments of `shoal gen`.
 #[derive(Debug, clap::Args)]
@@ -38,12 +38,19 @@ pub struct GenCmd {
     pub obstacles: ObstacleCount,
     /// An obstacle course of this family instead of gates: gate, offset,
     /// asymmetric, slalom, turn, s-bend, cylinders, angled, depth, current
-    /// (the route, its obstacles and any current drawn from the course seed).
+    /// (the route, its obstacles and any current drawn from the course seed),
+    /// or composed: two to five features strung along one route, gap widths
+    /// from the formation's full width down to the narrowest it passes.
     #[arg(long, value_enum)]
     pub course: Option<Family>,
     /// The course's seed (default: `--seed`): one course, several noise seeds.
     #[arg(long, requires = "course")]
     pub course_seed: Option<u64>,
+    /// With `--course composed`: features the course must have, comma
+    /// separated (gap, turn, u-turn, s-bend, cylinders, spheres, walls,
+    /// depth, current); the rest are drawn from the course seed as usual.
+    #[arg(long, value_enum, value_delimiter = ',', requires = "course")]
+    pub with: Vec<Feature>,
     /// Scenario name (default `gen-<shape>-<N>-s<seed>`).
     #[arg(long)]
     pub name: Option<String>,
@@ -85,6 +92,7 @@ impl From<&GenCmd> for GenOptions {
             course: c.course,
             course_seed: c.course_seed,
             camera: c.camera.into(),
+            with: c.with.clone(),
         }
     }
 }

@@ -65,10 +65,15 @@ pub enum Family {
     Depth,
     /// A cross current of 0.1-0.3 m/s from port or starboard through a gap.
     Current,
+    /// Not a preset: two to five features drawn from the whole space (gaps of
+    /// any width the formation can pass, turns up to 180°, S-bends, fields of
+    /// cylinders and spheres, walls at any angle, depth changes) with currents
+    /// over any part ([`super::compose`]).
+    Composed,
 }
 
 impl Family {
-    /// Every family, in order.
+    /// Every preset family, in order ([`Family::Composed`] is not one).
     pub const ALL: [Family; 10] = [
         Family::Gate,
         Family::Offset,
@@ -95,6 +100,7 @@ impl Family {
             Family::Angled => "angled",
             Family::Depth => "depth",
             Family::Current => "current",
+            Family::Composed => "composed",
         }
     }
 }
@@ -108,7 +114,8 @@ impl std::fmt::Display for Family {
 /// What the course is fitted to: the formation's size and the gate's gap.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Geom {
-    /// Half the gap of a gate, m.
+    /// Half the gap of a gate, m: the narrowest the formation passes (its
+    /// outermost files shifted inward, see [`super::narrowest_gap_m`]).
     pub half_gap_m: f64,
     /// The outermost vehicle's distance from the leader's track, m.
     pub outer_m: f64,
@@ -151,11 +158,15 @@ pub struct Course {
     pub turns_deg: Vec<f64>,
     /// Gates (gaps between walls) on the route.
     pub gates: usize,
+    /// What a composed course holds, in order (empty for a preset).
+    pub features: Vec<super::compose::Feature>,
+    /// Zones of current (a composed course's currents over parts of it).
+    pub current_zones: Vec<sim_plant::current::CurrentZone>,
 }
 
 /// The route as a polyline being built: vertices in NE, their depths.
 #[derive(Debug, Clone)]
-struct Route {
+pub(super) struct Route {
     /// (north, east, depth) of each vertex, the start first.
     pts: Vec<[f64; 3]>,
 }
@@ -170,7 +181,7 @@ impl Route {
     fn end(&self) -> [f64; 3] {
         self.pts.last().copied().unwrap_or_default()
     }
-    fn len(&self) -> f64 {
+    pub(super) fn len(&self) -> f64 {
         self.pts
             .windows(2)
             .map(|w| ((w[1][0] - w[0][0]).powi(2) + (w[1][1] - w[0][1]).powi(2)).sqrt())
@@ -186,7 +197,7 @@ impl Route {
     }
     /// Extends the route straight on by `d` metres at the heading of the
     /// last leg turned by `turn` rad, ending at `depth`.
-    fn extend(&mut self, turn: f64, d: f64, depth: f64) {
+    pub(super) fn extend(&mut self, turn: f64, d: f64, depth: f64) {
         let psi = self.heading() + turn;
         let last = self.end();
         self.pts
@@ -194,7 +205,7 @@ impl Route {
     }
     /// Point (north, east, depth) and heading at arc length `s` (straight
     /// on past the end).
-    fn at(&self, s: f64) -> ([f64; 3], f64) {
+    pub(super) fn at(&self, s: f64) -> ([f64; 3], f64) {
         let mut left = s;
         for w in self.pts.windows(2) {
             let (a, b) = (w[0], w[1]);
@@ -223,18 +234,18 @@ impl Route {
 }
 
 /// Builds a course along a route as it is laid out.
-struct Builder<'a> {
-    g: Geom,
+pub(super) struct Builder<'a> {
+    pub(super) g: Geom,
     rng: &'a mut SplitMix,
-    route: Route,
-    solids: Vec<Solid>,
-    end_m: f64,
-    turns_deg: Vec<f64>,
-    gates: usize,
+    pub(super) route: Route,
+    pub(super) solids: Vec<Solid>,
+    pub(super) end_m: f64,
+    pub(super) turns_deg: Vec<f64>,
+    pub(super) gates: usize,
 }
 
 impl<'a> Builder<'a> {
-    fn new(g: Geom, rng: &'a mut SplitMix) -> Self {
+    pub(super) fn new(g: Geom, rng: &'a mut SplitMix) -> Self {
         Self {
             g,
             rng,
@@ -245,11 +256,11 @@ impl<'a> Builder<'a> {
             gates: 0,
         }
     }
-    fn u(&mut self) -> f64 {
+    pub(super) fn u(&mut self) -> f64 {
         self.rng.unit()
     }
     /// +1 or −1.
-    fn sign(&mut self) -> f64 {
+    pub(super) fn sign(&mut self) -> f64 {
         if self.u() < 0.5 {
             -1.0
         } else {
@@ -257,11 +268,11 @@ impl<'a> Builder<'a> {
         }
     }
     /// Depth at the route's current end.
-    fn depth(&self) -> f64 {
+    pub(super) fn depth(&self) -> f64 {
         self.route.pts.last().map_or(self.g.depth_m, |p| p[2])
     }
     /// Straight on until the route is `s` long.
-    fn straight_to(&mut self, s: f64) {
+    pub(super) fn straight_to(&mut self, s: f64) {
         let l = self.route.len();
         if s > l {
             let d = self.depth();
@@ -270,11 +281,11 @@ impl<'a> Builder<'a> {
     }
     /// How far before and after its vertex the leader's arc of a turn of
     /// `deg` reaches, m.
-    fn tangent(&self, deg: f64) -> f64 {
+    pub(super) fn tangent(&self, deg: f64) -> f64 {
         self.g.turn_radius_m * (deg.to_radians().abs() / 2.0).tan()
     }
     /// A turn of `deg` at arc length `s`.
-    fn turn_at(&mut self, s: f64, deg: f64) {
+    pub(super) fn turn_at(&mut self, s: f64, deg: f64) {
         self.straight_to(s);
         let d = self.depth();
         // a short leg carries the new heading
@@ -284,7 +295,14 @@ impl<'a> Builder<'a> {
     }
     /// A box whose centre is `s` along and `e` across, with half extents
     /// (along, across) and its yaw relative to the route.
-    fn wall(&mut self, s: f64, e: f64, half_along: f64, half_across: f64, rel_yaw_deg: f64) {
+    pub(super) fn wall(
+        &mut self,
+        s: f64,
+        e: f64,
+        half_along: f64,
+        half_across: f64,
+        rel_yaw_deg: f64,
+    ) {
         let (p, psi) = self.route.at(s);
         let right = psi + PI / 2.0;
         self.solids.push(Solid::Box {
@@ -298,7 +316,21 @@ impl<'a> Builder<'a> {
         });
         self.end_m = self.end_m.max(s + half_along);
     }
-    fn cylinder(&mut self, s: f64, e: f64, r: f64) {
+    /// A sphere of radius `r`, `s` along, `e` across and `dz` below the route.
+    pub(super) fn sphere(&mut self, s: f64, e: f64, dz: f64, r: f64) {
+        let (p, psi) = self.route.at(s);
+        let right = psi + PI / 2.0;
+        self.solids.push(Solid::Sphere {
+            center_ned_m: [
+                mm(p[0] + e * right.cos()),
+                mm(p[1] + e * right.sin()),
+                mm(p[2] + dz),
+            ],
+            radius_m: mm(r),
+        });
+        self.end_m = self.end_m.max(s + r);
+    }
+    pub(super) fn cylinder(&mut self, s: f64, e: f64, r: f64) {
         let (p, psi) = self.route.at(s);
         let right = psi + PI / 2.0;
         self.solids.push(Solid::Cylinder {
@@ -315,27 +347,33 @@ impl<'a> Builder<'a> {
     /// Half-thickness of the walls of a gap centred `e` off the track, so
     /// they reach past the outermost file on either side.
     fn wall_half_width(&self, e: f64) -> f64 {
-        ((self.g.outer_m + WALL_OVERHANG_M + e.abs() - self.g.half_gap_m) / 2.0)
-            .max(MIN_WALL_HALF_WIDTH_M)
+        self.wall_half_width_for(e, self.g.half_gap_m)
+    }
+    /// [`Self::wall_half_width`] for a gap of half width `hg`.
+    pub(super) fn wall_half_width_for(&self, e: f64, hg: f64) -> f64 {
+        ((self.g.outer_m + WALL_OVERHANG_M + e.abs() - hg) / 2.0).max(MIN_WALL_HALF_WIDTH_M)
     }
     /// A gate: walls `len` long from `s0`, the gap centred `e` across,
     /// each side `len_port`/`len_stbd` long (centred on the gate's middle).
-    fn gate(&mut self, s0: f64, len_port: f64, len_stbd: f64, e: f64) {
+    pub(super) fn gate(&mut self, s0: f64, len_port: f64, len_stbd: f64, e: f64) {
+        self.gate_of(s0, len_port, len_stbd, e, self.g.half_gap_m);
+    }
+    /// [`Self::gate`] with a gap of half width `hg`.
+    pub(super) fn gate_of(&mut self, s0: f64, len_port: f64, len_stbd: f64, e: f64, hg: f64) {
         let len = len_port.max(len_stbd);
         self.straight_to(s0 + len + 1.0);
-        let w = self.wall_half_width(e);
-        let hg = self.g.half_gap_m;
+        let w = self.wall_half_width_for(e, hg);
         let mid = s0 + len / 2.0;
         self.wall(mid, e - hg - w, len_port / 2.0, w, 0.0);
         self.wall(mid, e + hg + w, len_stbd / 2.0, w, 0.0);
         self.gates += 1;
     }
-    fn wall_len(&mut self) -> f64 {
+    pub(super) fn wall_len(&mut self) -> f64 {
         16.0 + 8.0 * self.u()
     }
     /// Where a gate may start after everything so far (a turn's vertex
     /// needs [`TURN_CLEAR_M`]).
-    fn next_gate_start(&mut self, gap_m: f64) -> f64 {
+    pub(super) fn next_gate_start(&mut self, gap_m: f64) -> f64 {
         let after_turn = if self.turns_deg.is_empty() {
             0.0
         } else {
@@ -344,7 +382,7 @@ impl<'a> Builder<'a> {
         (self.end_m + gap_m).max(after_turn).max(FIRST_FEATURE_M)
     }
     /// Where the vertex of a turn of `deg` may come after everything so far.
-    fn next_turn_at(&mut self, deg: f64) -> f64 {
+    pub(super) fn next_turn_at(&mut self, deg: f64) -> f64 {
         let t = self.tangent(deg);
         let after_gate = if self.gates > 0 {
             self.end_m + self.g.group_len_m + TURN_AFTER_GATE_M + 10.0 * self.u() + t
@@ -354,7 +392,7 @@ impl<'a> Builder<'a> {
         after_gate.max(FIRST_FEATURE_M - 5.0 + 10.0 * self.u() + t)
     }
 
-    fn finish(mut self, family: Family, what: String) -> Course {
+    pub(super) fn finish(mut self, family: Family, what: String) -> Course {
         let goal_s = self.end_m + self.g.settle_m;
         self.straight_to(goal_s);
         let (goal, _) = self.route.at(goal_s);
@@ -376,6 +414,8 @@ impl<'a> Builder<'a> {
             end_m: self.end_m,
             turns_deg: self.turns_deg,
             gates: self.gates,
+            features: Vec::new(),
+            current_zones: Vec::new(),
         }
     }
 }
@@ -408,8 +448,9 @@ fn simplify(start: &[f64; 3], pts: &[[f64; 3]]) -> Vec<[f64; 3]> {
 }
 
 /// Builds the course of `family` for the formation `g` from `seed`: the
-/// same arguments, the same course.
-pub fn build(family: Family, g: Geom, seed: u64) -> Course {
+/// same arguments, the same course. `with`: the features a composed course
+/// must have (ignored by the presets).
+pub fn build(family: Family, g: Geom, seed: u64, with: &[super::Feature]) -> Course {
     let mut rng = SplitMix(seed ^ 0x434F_5552_5345);
     let mut b = Builder::new(g, &mut rng);
     let what = match family {
@@ -633,11 +674,15 @@ pub fn build(family: Family, g: Geom, seed: u64) -> Course {
             c.current_ned_mps = Some([0.0, -from * m, 0.0]);
             return c;
         }
+        Family::Composed => {
+            drop(b);
+            return super::compose::build(g, &mut rng, with);
+        }
     };
     b.finish(family, what)
 }
 
-fn side(x: f64) -> &'static str {
+pub(super) fn side(x: f64) -> &'static str {
     if x < 0.0 {
         "port"
     } else {

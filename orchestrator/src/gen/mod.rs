@@ -42,6 +42,7 @@
 //! The seed sets the scenario's `seed` (sensor noise) and jitters where the
 //! gates stand and how long their walls are.
 
+pub mod compose;
 pub mod course;
 mod layout;
 mod render;
@@ -51,6 +52,7 @@ mod tests;
 use camera_pose::CameraConfig;
 use planner::formation::{FollowerSlot, FormationParams};
 
+pub use compose::Feature;
 pub use course::{Course, Family};
 pub use layout::{Lattice, Member};
 use render::render;
@@ -194,6 +196,9 @@ pub struct GenOptions {
     /// The camera model (`[camera] model`); with images the tick is the
     /// 0.01 s that a six-stage frame needs.
     pub camera: shoal_scenario::CameraModel,
+    /// Features a composed course must have (with [`Family::Composed`]
+    /// only; the others are drawn as usual).
+    pub with: Vec<Feature>,
 }
 
 impl Default for GenOptions {
@@ -208,6 +213,7 @@ impl Default for GenOptions {
             course: None,
             course_seed: None,
             camera: shoal_scenario::CameraModel::Point,
+            with: Vec::new(),
         }
     }
 }
@@ -242,6 +248,9 @@ pub enum GenError {
         /// The limit.
         max: usize,
     },
+    /// `--with` on anything but a composed course.
+    #[error("--with needs --course composed (the presets have fixed features)")]
+    WithNeedsComposed,
     /// A name a scenario cannot have.
     #[error("--name `{0}`: must be 1 to 64 of [A-Za-z0-9_.-], not starting with `.`")]
     Name(String),
@@ -308,6 +317,8 @@ pub struct Plan {
     pub course: Option<Course>,
     /// Half the gap of a gate (of the gates, or of the course's gaps), m.
     pub half_gap_m: f64,
+    /// The outermost vehicle's distance from the leader's track, m.
+    pub outer_m: f64,
 }
 
 /// SplitMix64: a small deterministic generator for the seed's jitter.
@@ -336,6 +347,28 @@ fn valid_name(s: &str) -> bool {
             .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
 }
 
+/// The narrowest gap the formation of `members` passes at the safe distance
+/// and its full width, m (what `shoal check` reports:
+/// [`planner::formation::narrowest_gap_m`]).
+pub fn narrowest_gap_m(members: &[Member]) -> Result<(f64, f64), GenError> {
+    let slots = slots_of(members);
+    planner::formation::narrowest_gap_m(&members[0].name, &slots, SAFE_DISTANCE_M)
+        .map_err(|e| GenError::Internal(e.to_string()))
+}
+
+fn slots_of(members: &[Member]) -> Vec<FollowerSlot> {
+    members
+        .iter()
+        .filter_map(|m| {
+            Some(FollowerSlot {
+                name: m.name.clone(),
+                parent: members[m.parent?].name.clone(),
+                slot_in_parent_m: m.slot_m?,
+            })
+        })
+        .collect()
+}
+
 /// Rounds to a millimetre (keeps the file short and stable).
 fn mm(x: f64) -> f64 {
     (x * 1000.0).round() / 1000.0
@@ -349,16 +382,7 @@ fn assign(
     members: &[Member],
     with_margin: bool,
 ) -> Result<(Vec<(f64, f64)>, f64), planner::formation::FormationError> {
-    let slots: Vec<FollowerSlot> = members
-        .iter()
-        .filter_map(|m| {
-            Some(FollowerSlot {
-                name: m.name.clone(),
-                parent: members[m.parent?].name.clone(),
-                slot_in_parent_m: m.slot_m?,
-            })
-        })
-        .collect();
+    let slots = slots_of(members);
     let params = FormationParams {
         visibility_range_m: CameraConfig::default().visibility_range_m,
         ..Default::default()
@@ -413,6 +437,9 @@ pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
         }
         ObstacleCount::Count(k) => k,
     };
+    if !opts.with.is_empty() && opts.course != Some(Family::Composed) {
+        return Err(GenError::WithNeedsComposed);
+    }
     let name = match &opts.name {
         Some(s) if valid_name(s) => s.clone(),
         Some(s) => return Err(GenError::Name(s.clone())),
@@ -460,6 +487,7 @@ pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
     let Some((lattice, members, displacements, assigned_for_m)) = found else {
         return Err(GenError::Formation(failure));
     };
+    let outer_m = members.iter().map(|m| m.pos_m[1].abs()).fold(0.0, f64::max);
 
     // Vertical shifts accumulate down the tree (each follower's slot is in
     // its parent's frame): start deep enough that no one surfaces.
@@ -536,7 +564,12 @@ pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
             half_height_m: (shift_up_m + shift_down_m) / 2.0 + 10.0,
             turn_radius_m: turn_radius_m(&members),
         };
-        course::build(family, geom, opts.course_seed.unwrap_or(opts.seed))
+        course::build(
+            family,
+            geom,
+            opts.course_seed.unwrap_or(opts.seed),
+            &opts.with,
+        )
     });
     if let Some(c) = &course {
         gates.clear();
@@ -570,12 +603,17 @@ pub fn plan(opts: &GenOptions) -> Result<Plan, GenError> {
         memory_max_age_s,
         course,
         half_gap_m,
+        outer_m,
     })
 }
 
 /// Generates the scenario TOML for `opts`: deterministic, and accepted by
 /// `shoal check`.
 pub fn generate(opts: &GenOptions) -> Result<String, GenError> {
-    let p = plan(opts)?;
-    render(&p).map_err(|e| GenError::Internal(format!("formatting: {e}")))
+    text(&plan(opts)?)
+}
+
+/// The scenario TOML of a plan.
+pub fn text(p: &Plan) -> Result<String, GenError> {
+    render(p).map_err(|e| GenError::Internal(format!("formatting: {e}")))
 }

@@ -492,3 +492,137 @@ fn with_images_the_generated_file_asks_for_them_and_the_six_stage_tick() {
     let p = verify(&opts(Shape::Paper, 5, 2, 4.0));
     assert_eq!(p.camera_model(), shoal_scenario::CameraModel::Point);
 }
+
+fn composed(shape: Shape, n: usize, course_seed: u64) -> GenOptions {
+    GenOptions {
+        course: Some(Family::Composed),
+        course_seed: Some(course_seed),
+        ..opts(shape, n, 0, 4.0)
+    }
+}
+
+/// Composed courses for five formations over a dozen course seeds: `shoal
+/// check` accepts each (starts clear, parents in view), two to five
+/// features each, every gap between the narrowest the formation passes and
+/// its full width, no obstacle thinner than 0.3 m, no current over 0.3 m/s,
+/// no solid near the route away from its own feature, the same options the
+/// same file.
+#[test]
+fn composed_courses_are_checked_and_stay_within_the_space() {
+    for (shape, n) in [
+        (Shape::Paper, 5),
+        (Shape::V, 9),
+        (Shape::Column, 15),
+        (Shape::Triangle, 25),
+        (Shape::Grid, 40),
+    ] {
+        for cs in 0..12 {
+            let o = composed(shape, n, cs);
+            let s = verify(&o);
+            let p = plan(&o).unwrap();
+            let c = p.course.as_ref().unwrap();
+            let (narrowest, _) = narrowest_gap_m(&p.members).unwrap();
+            assert!(
+                2.0 * p.half_gap_m >= narrowest - 1e-9,
+                "{shape:?} {n}: the plan's narrowest gap {} m is under the check's {narrowest} m",
+                2.0 * p.half_gap_m
+            );
+            let structural = c
+                .features
+                .iter()
+                .filter(|f| **f != Feature::Current)
+                .count();
+            assert!(
+                (compose::MIN_FEATURES..=compose::MAX_FEATURES).contains(&structural),
+                "{:?}",
+                c.features
+            );
+            for solid in s.obstacles_as::<sonar::Obstacle>().unwrap() {
+                match solid {
+                    sonar::Obstacle::Cylinder { radius_m, .. }
+                    | sonar::Obstacle::Sphere { radius_m, .. } => {
+                        assert!(radius_m >= compose::MIN_RADIUS_M - 1e-9);
+                    }
+                    _ => {}
+                }
+            }
+            for z in &c.current_zones {
+                let m = z.current_ned_mps.iter().map(|x| x * x).sum::<f64>().sqrt();
+                assert!(m <= compose::MAX_CURRENT_MPS + 1e-3, "{m}");
+            }
+            assert_eq!(
+                c.current_zones.is_empty(),
+                !c.features.contains(&Feature::Current)
+            );
+            assert_eq!(generate(&o).unwrap(), generate(&o).unwrap());
+        }
+    }
+}
+
+/// Over 300 course seeds every kind of feature turns up, turns reach past
+/// 150°, and gaps span the formation's range from its narrowest to its full
+/// width; seeds differ.
+#[test]
+fn composed_courses_sample_every_kind_and_the_whole_range_of_widths() {
+    let mut seen = std::collections::BTreeMap::new();
+    let mut widest_turn = 0.0f64;
+    let (mut narrow, mut wide) = (false, false);
+    let p0 = plan(&composed(Shape::Paper, 5, 0)).unwrap();
+    let (lo, hi) = (2.0 * p0.half_gap_m, 2.0 * (p0.outer_m + SAFE_DISTANCE_M));
+    for cs in 0..300 {
+        let p = plan(&composed(Shape::Paper, 5, cs)).unwrap();
+        let c = p.course.unwrap();
+        for f in &c.features {
+            *seen.entry(*f).or_insert(0) += 1;
+        }
+        // a U-turn is flown as two half turns in a row
+        let mut turns = c.turns_deg.clone();
+        turns.push(0.0);
+        for w in turns.windows(2) {
+            let both = if w[0] * w[1] > 0.0 { w[0] + w[1] } else { w[0] };
+            widest_turn = widest_turn.max(both.abs());
+        }
+        for gap in c.what.split("a gap ").skip(1) {
+            let w: f64 = gap.split(' ').next().unwrap().parse().unwrap();
+            assert!(w >= lo - 0.1 && w <= hi + 0.1, "{w} outside {lo}-{hi}");
+            narrow |= w < lo + 0.5;
+            wide |= w > hi - 0.5;
+        }
+    }
+    for f in Feature::ALL {
+        assert!(seen.get(&f).copied().unwrap_or(0) >= 5, "{f}: {seen:?}");
+    }
+    assert!(widest_turn > 150.0, "{widest_turn}");
+    assert!(narrow && wide, "gaps from {lo} to {hi} m");
+    assert_ne!(
+        generate(&composed(Shape::Paper, 5, 1)).unwrap(),
+        generate(&composed(Shape::Paper, 5, 2)).unwrap()
+    );
+}
+
+/// `--with`: every kind asked for is on the course, for every kind and a
+/// few course seeds, and the file says how to make it again.
+#[test]
+fn composed_courses_have_the_features_asked_for() {
+    for f in Feature::ALL {
+        for cs in 0..4 {
+            let o = GenOptions {
+                with: vec![f],
+                ..composed(Shape::Paper, 5, cs)
+            };
+            verify(&o);
+            let p = plan(&o).unwrap();
+            let c = p.course.as_ref().unwrap();
+            assert!(c.features.contains(&f), "{f} {cs}: {:?}", c.features);
+            assert!(c.features.iter().any(|f| f.is_solid()), "{:?}", c.features);
+            let text = generate(&o).unwrap();
+            assert!(text.contains(&format!("--with {f}`")), "{f}");
+        }
+    }
+    let o = GenOptions {
+        with: vec![Feature::Walls],
+        course: Some(Family::Gate),
+        ..opts(Shape::Paper, 5, 0, 4.0)
+    };
+    assert_eq!(generate(&o), Err(GenError::WithNeedsComposed));
+}

@@ -683,3 +683,108 @@ pub fn check(
         None => Ok(()),
     }
 }
+
+/// Room a gap leaves beyond the safe distance between a wall and the nearest file that does
+/// not shift, at the most, m (`shoal gen`'s gates use it).
+pub const GAP_CLEAR_MARGIN_M: f64 = 2.0;
+
+/// The narrowest gap the formation passes at the safe distance `d_min_m` with today's
+/// method, and its full width (nominal lateral span), m: `(narrowest, full)`.
+///
+/// A V of heads at most two levels deep (the paper's five: no two vehicles on one track)
+/// compresses fully: every follower may shift onto its parent's track, so the gap needs
+/// only the safe distance plus [`GAP_CLEAR_MARGIN_M`] on either side of the leader's track
+/// (the paper's 8 m passage). Any other tree passes with its outermost file on either side shifted inward onto the next
+/// file's track: the walls stand the safe distance plus the margin (at most the room
+/// between the two outermost files beyond `d_min_m`) outside the next file. Lateral offsets
+/// are summed along each chain of slots, with the formation on one heading.
+///
+/// # Errors
+/// [`FormationError`] when the followers do not form a tree under `leader`.
+pub fn narrowest_gap_m(
+    leader: &str,
+    followers: &[FollowerSlot],
+    d_min_m: f64,
+) -> Result<(f64, f64), FormationError> {
+    build_tree(leader, followers)?;
+    let by_name: HashMap<&str, &FollowerSlot> =
+        followers.iter().map(|f| (f.name.as_str(), f)).collect();
+    // (lateral offset, depth in the tree) of each follower
+    let chain = |f: &FollowerSlot| {
+        let (mut y, mut depth, mut at) = (0.0, 0usize, f);
+        loop {
+            y += at.slot_in_parent_m[1];
+            depth += 1;
+            match by_name.get(at.parent.as_str()) {
+                Some(p) if depth <= followers.len() => at = p,
+                _ => return (y, depth),
+            }
+        }
+    };
+    let placed: Vec<(f64, usize)> = followers.iter().map(chain).collect();
+    let outer = placed.iter().map(|p| p.0.abs()).fold(0.0, f64::max);
+    let deepest = placed.iter().map(|p| p.1).max().unwrap_or(0);
+    let full = 2.0 * outer;
+    let mut tracks: Vec<f64> = placed.iter().map(|p| p.0).chain([0.0]).collect();
+    tracks.sort_by(f64::total_cmp);
+    let one_per_track = tracks.windows(2).all(|w| w[1] - w[0] > 0.05);
+    if deepest <= 2 && one_per_track {
+        return Ok((2.0 * (d_min_m + GAP_CLEAR_MARGIN_M), full));
+    }
+    // the second-outermost distinct lateral offset (the leader's track counts)
+    let next = placed
+        .iter()
+        .map(|p| p.0.abs())
+        .filter(|y| *y < outer - 0.05)
+        .fold(0.0, f64::max);
+    let margin = GAP_CLEAR_MARGIN_M.min(outer - next - d_min_m).max(0.0);
+    Ok((2.0 * (next + d_min_m + margin), full))
+}
+
+#[cfg(test)]
+mod gap_tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn slot(name: &str, parent: &str, y: f64) -> FollowerSlot {
+        FollowerSlot {
+            name: name.into(),
+            parent: parent.into(),
+            slot_in_parent_m: [-8.0, y, 0.0],
+        }
+    }
+
+    #[test]
+    fn the_papers_five_pass_its_8_m_passage_and_a_deep_v_only_shifts_its_outer_file() {
+        let paper = [
+            slot("F1", "L", -4.0),
+            slot("F2", "L", 4.0),
+            slot("F3", "F1", -4.0),
+            slot("F4", "F2", 4.0),
+        ];
+        assert_eq!(narrowest_gap_m("L", &paper, 2.0).unwrap(), (8.0, 16.0));
+        let mut v = paper.to_vec();
+        v.push(slot("F5", "F3", -4.0));
+        v.push(slot("F6", "F4", 4.0));
+        // outer file at 12 m shifts onto the one at 8 m: walls 4 m outside it
+        assert_eq!(narrowest_gap_m("L", &v, 2.0).unwrap(), (24.0, 24.0));
+        // files 3 m apart leave 1 m beyond the safe distance
+        let close: Vec<FollowerSlot> = v
+            .iter()
+            .map(|f| FollowerSlot {
+                slot_in_parent_m: [-8.0, f.slot_in_parent_m[1] * 0.75, 0.0],
+                ..f.clone()
+            })
+            .collect();
+        assert_eq!(narrowest_gap_m("L", &close, 2.0).unwrap(), (18.0, 18.0));
+        assert!(narrowest_gap_m("L", &[slot("F1", "X", 1.0)], 2.0).is_err());
+        // two deep but a follower on the leader's track: only the outer files shift
+        let mut wedge = paper.to_vec();
+        wedge[2] = slot("F3", "F1", 4.0);
+        assert_eq!(narrowest_gap_m("L", &wedge, 2.0).unwrap(), (16.0, 16.0));
+        let mut tri = paper[..2].to_vec();
+        tri.push(slot("F3", "L", 0.0));
+        tri.push(slot("F4", "F1", -4.0));
+        assert_eq!(narrowest_gap_m("L", &tri, 2.0).unwrap(), (16.0, 16.0));
+    }
+}

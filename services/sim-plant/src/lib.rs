@@ -58,7 +58,9 @@
 //! **Ocean current.** A constant NED current `v_c` enters through the relative velocity
 //! `ν_r = ν − [Rᵀ v_c ; 0]`: `M ν̇_r + C(ν_r)ν_r + D(ν_r)ν_r + g = τ` (exact for a constant,
 //! irrotational current, Fossen 2011 Property 8.1), `ν̇ = ν̇_r − [ω × Rᵀv_c ; 0]`, and the
-//! position integrates the velocity over ground `ν`.
+//! position integrates the velocity over ground `ν`. [`PlantConfig::current_zones`] make
+//! the current differ in places ([`current`]): then `v_c` is taken where the vehicle is, and
+//! its rate along the vehicle's path adds `Rᵀ v̇_c` to `ν̇`.
 //!
 //! ## Integrator
 //! Classic RK4 on `(p, q, ν)`, step `step_s` (default 0.01 s); [`Plant::advance`] runs
@@ -67,12 +69,14 @@
 //! becomes non-finite. `τ` is saturated per axis to `±thrust_max` first.
 #![forbid(unsafe_code)]
 
+pub mod current;
 pub mod model;
 pub mod nav;
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
+use current::{CurrentField, CurrentZone};
 use model::Vehicle;
 
 /// Errors of this crate.
@@ -221,6 +225,10 @@ pub struct PlantConfig {
     pub thrust_max: [f64; 6],
     /// Constant ocean current in NED, m/s. Default [0, 0, 0].
     pub current_ned_mps: [f64; 3],
+    /// Zones where the current differs (each adds its own to the constant one). Default
+    /// none.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub current_zones: Vec<CurrentZone>,
 }
 
 impl Default for PlantConfig {
@@ -230,6 +238,7 @@ impl Default for PlantConfig {
             step_s: 0.01,
             thrust_max: [500.0, 300.0, 300.0, 100.0, 200.0, 200.0],
             current_ned_mps: [0.0; 3],
+            current_zones: Vec::new(),
         }
     }
 }
@@ -249,6 +258,9 @@ impl PlantConfig {
             "finite and > 0",
         )?;
         check_all("current_ned_mps", &self.current_ned_mps, |_| true, "finite")?;
+        for (i, z) in self.current_zones.iter().enumerate() {
+            z.validate(i)?;
+        }
         Ok(())
     }
 }
@@ -302,7 +314,7 @@ pub struct Plant {
     vehicle: Vehicle,
     step_s: f64,
     thrust_max: Vector6<f64>,
-    current_ned: Vector3<f64>,
+    current: CurrentField,
     state: PlantState,
     applied_tau: Vector6<f64>,
 }
@@ -327,7 +339,7 @@ impl Plant {
             vehicle: Vehicle::new(&config.vehicle)?,
             step_s: config.step_s,
             thrust_max: Vector6::from(config.thrust_max),
-            current_ned: Vector3::from(config.current_ned_mps),
+            current: CurrentField::new(config.current_ned_mps, config.current_zones.clone()),
             state: PlantState {
                 attitude: UnitQuaternion::new_normalize(*initial.attitude.quaternion()),
                 ..initial
@@ -372,20 +384,31 @@ impl Plant {
         tau.zip_map(&self.thrust_max, |t, m| t.clamp(-m, m))
     }
 
-    fn deriv(&self, q_raw: &Quaternion<f64>, nu: &Vector6<f64>, tau: &Vector6<f64>) -> Deriv {
+    fn deriv(
+        &self,
+        p: &Vector3<f64>,
+        q_raw: &Quaternion<f64>,
+        nu: &Vector6<f64>,
+        tau: &Vector6<f64>,
+    ) -> Deriv {
         let q = UnitQuaternion::new_normalize(*q_raw);
-        let v_c = q.inverse_transform_vector(&self.current_ned);
+        let v_c = q.inverse_transform_vector(&self.current.at(p));
         let omega: Vector3<f64> = nu.fixed_rows::<3>(3).into_owned();
         let nu_r = nu - Vector6::new(v_c.x, v_c.y, v_c.z, 0.0, 0.0, 0.0);
         let mut nu_dot = self.vehicle.nu_dot(&nu_r, &q, tau);
-        // ν̇ = ν̇_r + ν̇_c, with ν̇_c = −ω × v_c for a current constant in NED.
-        let c_dot = -omega.cross(&v_c);
+        let v: Vector3<f64> = nu.fixed_rows::<3>(0).into_owned();
+        let p_dot = q.transform_vector(&v);
+        // ν̇ = ν̇_r + ν̇_c, with ν̇_c = −ω × v_c for a current constant in NED, and
+        // Rᵀ v̇_c more where it changes along the path.
+        let mut c_dot = -omega.cross(&v_c);
+        if !self.current.is_uniform() {
+            c_dot += q.inverse_transform_vector(&self.current.rate_along(p, &p_dot));
+        }
         nu_dot[0] += c_dot.x;
         nu_dot[1] += c_dot.y;
         nu_dot[2] += c_dot.z;
-        let v: Vector3<f64> = nu.fixed_rows::<3>(0).into_owned();
         Deriv {
-            p: q.transform_vector(&v),
+            p: p_dot,
             q: q_raw * Quaternion::from_imag(omega) * 0.5,
             nu: nu_dot,
         }
@@ -396,10 +419,20 @@ impl Plant {
         let p0 = s.position_ned_m;
         let q0 = *s.attitude.quaternion();
         let n0 = s.nu;
-        let k1 = self.deriv(&q0, &n0, tau);
-        let k2 = self.deriv(&(q0 + k1.q * (h / 2.0)), &(n0 + k1.nu * (h / 2.0)), tau);
-        let k3 = self.deriv(&(q0 + k2.q * (h / 2.0)), &(n0 + k2.nu * (h / 2.0)), tau);
-        let k4 = self.deriv(&(q0 + k3.q * h), &(n0 + k3.nu * h), tau);
+        let k1 = self.deriv(&p0, &q0, &n0, tau);
+        let k2 = self.deriv(
+            &(p0 + k1.p * (h / 2.0)),
+            &(q0 + k1.q * (h / 2.0)),
+            &(n0 + k1.nu * (h / 2.0)),
+            tau,
+        );
+        let k3 = self.deriv(
+            &(p0 + k2.p * (h / 2.0)),
+            &(q0 + k2.q * (h / 2.0)),
+            &(n0 + k2.nu * (h / 2.0)),
+            tau,
+        );
+        let k4 = self.deriv(&(p0 + k3.p * h), &(q0 + k3.q * h), &(n0 + k3.nu * h), tau);
         let w = h / 6.0;
         let p = p0 + (k1.p + (k2.p + k3.p) * 2.0 + k4.p) * w;
         let q = q0 + (k1.q + (k2.q + k3.q) * 2.0 + k4.q) * w;

@@ -313,6 +313,44 @@ fn drifts_with_the_ocean_current() {
     assert_relative_eq!(v_ned, Vector3::new(0.3, -0.2, 0.0), epsilon = 1e-3);
 }
 
+/// A cross-current zone across a northbound vehicle's path: inside, a drifting hull takes the
+/// zone's current; past it, the sideways drift decays again (damping only, no current).
+#[test]
+fn a_current_zone_drifts_a_vehicle_only_while_it_is_inside() {
+    use sim_plant::current::CurrentZone;
+    let config = PlantConfig {
+        current_zones: vec![CurrentZone {
+            center_ne_m: [0.0, 0.0],
+            half_length_m: 500.0,
+            half_width_m: 500.0,
+            yaw_deg: 0.0,
+            current_ned_mps: [0.0, 0.25, 0.0],
+            edge_m: 10.0,
+        }],
+        ..PlantConfig::default()
+    };
+    let mut plant = Plant::new(&config, PlantState::default()).unwrap();
+    plant.advance(&Vector6::zeros(), 300.0).unwrap();
+    let s = plant.state();
+    let v = s
+        .attitude
+        .transform_vector(&s.nu.fixed_rows::<3>(0).into_owned());
+    assert_relative_eq!(v, Vector3::new(0.0, 0.25, 0.0), epsilon = 2e-3);
+    // far outside the zone (a hull placed there at rest) there is no drift
+    let mut outside = Plant::new(
+        &config,
+        PlantState::at_rest(Vector3::new(0.0, 2000.0, 0.0), UnitQuaternion::identity()),
+    )
+    .unwrap();
+    outside.advance(&Vector6::zeros(), 50.0).unwrap();
+    assert!(outside.state().nu.fixed_rows::<3>(0).norm() < 1e-9);
+    // a bad zone names its key
+    let mut bad = config.clone();
+    bad.current_zones[0].half_width_m = 0.0;
+    let e = bad.validate().unwrap_err().to_string();
+    assert!(e.contains("current_zones[0].half_width_m"), "{e}");
+}
+
 #[test]
 fn config_defaults_round_trip_through_toml_and_unknown_keys_are_refused() {
     let config = PlantConfig::default();
