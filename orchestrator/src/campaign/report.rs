@@ -105,8 +105,13 @@ pub struct Report {
 impl Report {
     /// The report of `rows`.
     pub fn new(o: &CampaignOptions, rows: Vec<RunRow>) -> Self {
-        let by_family = o
-            .families
+        // over the space every course is composed: one row, not ten empty ones
+        let families = if o.space {
+            vec![crate::gen::Family::Composed]
+        } else {
+            o.families.clone()
+        };
+        let by_family = families
             .iter()
             .map(|f| Tally::of(f.name(), rows.iter().filter(|r| r.family == f.name())))
             .collect();

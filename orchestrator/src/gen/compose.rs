@@ -240,7 +240,10 @@ fn field(b: &mut Builder<'_>, s0: f64, spheres: bool) -> String {
     }
     for &(s, e, r) in &placed {
         if spheres {
-            let dz = 3.0 * (2.0 * b.u() - 1.0);
+            // the equator within half a radius of the route's depth: a
+            // horizontal sonar sees only a sliver of a sphere well above or
+            // below its plane (vertical sensing is the sensing issue's)
+            let dz = 0.5 * r * (2.0 * b.u() - 1.0);
             b.sphere(s, e, dz, r);
         } else {
             b.cylinder(s, e, r);
@@ -250,7 +253,12 @@ fn field(b: &mut Builder<'_>, s0: f64, spheres: bool) -> String {
     format!(
         "{} {} over {depth:.0} m, {apart:.1} m apart",
         placed.len(),
-        if spheres { "spheres" } else { "cylinders" }
+        match (spheres, placed.len()) {
+            (true, 1) => "sphere",
+            (true, _) => "spheres",
+            (false, 1) => "cylinder",
+            (false, _) => "cylinders",
+        }
     )
 }
 

@@ -68,7 +68,7 @@ pub enum Family {
     /// Not a preset: two to five features drawn from the whole space (gaps of
     /// any width the formation can pass, turns up to 180°, S-bends, fields of
     /// cylinders and spheres, walls at any angle, depth changes) with currents
-    /// over any part ([`super::compose`]).
+    /// over any part.
     Composed,
 }
 

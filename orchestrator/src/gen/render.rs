@@ -27,6 +27,12 @@ pub(super) fn render(p: &Plan) -> Result<String, std::fmt::Error> {
 }
 
 /// The comment block: the command that made the file and what it holds.
+/// Beams of a composed course's forward-looking multibeam (the most a
+/// sonar sample holds, `ipc_types::MAX_BEAMS`).
+pub const COMPOSED_BEAMS: usize = ipc_types::MAX_BEAMS;
+/// The sector they cover, deg: 7.5° apart, so that 7° cones nearly touch.
+pub const COMPOSED_SECTOR_DEG: f64 = 120.0;
+
 pub(super) fn render_header(t: &mut String, p: &Plan) -> std::fmt::Result {
     let o = &p.opts;
     let n = p.members.len();
@@ -262,6 +268,21 @@ pub(super) fn render_settings(t: &mut String, p: &Plan) -> std::fmt::Result {
         writeln!(t, "yaw_deg = {}", num(z.yaw_deg))?;
         writeln!(t, "current_ned_mps = {}", vec3(z.current_ned_mps))?;
         writeln!(t, "edge_m = {}", num(z.edge_m))?;
+        writeln!(t)?;
+    }
+    if p.course
+        .as_ref()
+        .is_some_and(|c| c.family == super::Family::Composed)
+    {
+        // obstacles down to 0.3 m: the paper's four 7° cones leave ±6.5° ahead
+        // and 13.5-26.5° either side unseen, so composed courses carry a
+        // forward-looking multibeam whose cones touch
+        writeln!(t, "[sonar]")?;
+        writeln!(
+            t,
+            "multibeam = {{ beams = {COMPOSED_BEAMS}, sector_deg = {} }}",
+            num(COMPOSED_SECTOR_DEG)
+        )?;
         writeln!(t)?;
     }
     writeln!(t, "[follower]")?;

@@ -164,10 +164,21 @@ pub fn resolve(s: &mut Scenario) -> anyhow::Result<()> {
     };
     let d_min = s.safety.safe_distance_m;
     let leader = s.leader().name.clone();
-    let assigned = planner::formation::assign_displacements(&leader, &slots, d_min, &params)
-        .context(
-        "formation: no displacement trajectories keep every pair apart and every parent in sight",
-    )?;
+    // a search only where the scenario leaves some D_a/D_b out: given ones
+    // are verified below as they are (a search may fail where a file's own
+    // assignment, from a longer search or by hand, is safe)
+    let given = s
+        .vehicles
+        .iter()
+        .filter(|v| v.parent.is_some())
+        .all(|v| v.d_a_m.is_some() && v.d_b_m.is_some());
+    let assigned = if given {
+        vec![(0.0, 0.0); slots.len()]
+    } else {
+        planner::formation::assign_displacements(&leader, &slots, d_min, &params).context(
+            "formation: no displacement trajectories keep every pair apart and every parent in sight",
+        )?
+    };
     let s_method_vertical = s.method.vertical_shift;
     let mut chosen = Vec::with_capacity(slots.len());
     for (slot, (d_a, d_b)) in slots.iter().zip(assigned) {

@@ -66,6 +66,10 @@ pub struct FormationParams {
     pub max_depth_shift_m: f64,
     /// Step of the `D_b` candidates, m (default 1).
     pub d_b_step_m: f64,
+    /// Candidates [`assign_displacements`] tries before it gives up (default 4000:
+    /// a few milliseconds for the paper's five; a failing search costs about as many
+    /// pair checks times the group's size).
+    pub search_budget: usize,
 }
 
 impl Default for FormationParams {
@@ -75,6 +79,7 @@ impl Default for FormationParams {
             occlusion_radius_m: 0.6,
             max_depth_shift_m: 3.0,
             d_b_step_m: 1.0,
+            search_budget: 4_000,
         }
     }
 }
@@ -571,7 +576,7 @@ pub fn assign_displacements(
     let mut choice = vec![0usize; followers.len()];
     let mut out = vec![(0.0, 0.0); followers.len()];
     let mut level = 0usize;
-    let mut budget = 4_000usize;
+    let mut budget = params.search_budget;
     // the least-bad failure at the deepest level reached
     let mut deepest: Option<(usize, f64, FormationError)> = None;
     while level < tree.order.len() {
