@@ -8,6 +8,7 @@ use crate::frames::{from_level, to_level, wrap, yaw_of};
 use crate::keepout;
 use crate::observer::{FixOutcome, ObserverParams, ParentObserver};
 use crate::shift::{beam_vector, Displacement, Shift, SlotFilter};
+use crate::trail::Trail;
 use crate::types::{
     cfg_err, check_finite, check_nonneg, check_pos, Mode, PlannerError, PlannerOutput,
     PlannerState, SonarScan, Target,
@@ -150,6 +151,12 @@ pub struct FollowerConfig {
     /// straight on, as the paper's constant-velocity observer; see
     /// [`ObserverParams::coordinated_turn`]).
     pub coordinated_turn: bool,
+    /// The slot's along-track part is a distance along the parent's path, not along its
+    /// heading now (default false: the paper's rigid slot). In a turn a rigid slot swings
+    /// across the track by its length times the turn, more at every level, and files fold
+    /// onto each other; with a trail each follower swims its parent's path offset sideways
+    /// ([`crate::trail`]). `shoal gen` sets it on composed courses.
+    pub trail: bool,
 }
 
 impl Default for FollowerConfig {
@@ -185,6 +192,7 @@ impl Default for FollowerConfig {
             search_s: 10.0,
             memory_cell_m: 0.5,
             coordinated_turn: true,
+            trail: false,
             view_half_angle_deg: 45.0,
             camera_mount_body_m: [1.4, 0.0, 0.0],
             parent_beacons_body_m: vec![
@@ -323,6 +331,8 @@ struct SlotState {
     /// The headway's averages: `v̄`, the target's velocity in the parent's level frame, and
     /// `r̄`, the parent's turn rate.
     headway_mean: Option<(Vector3<f64>, f64)>,
+    /// Where the parent's estimate has been (`trail`).
+    trail: Trail,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -423,6 +433,7 @@ impl FollowerPlanner {
                 },
                 anchor: None,
                 headway_mean: None,
+                trail: Trail::new(),
             }),
             mount: Vector3::from(cfg.sonar_mount_body_m),
             observer: Box::new(ParentObserver::new(ObserverParams {
@@ -612,6 +623,7 @@ impl FollowerPlanner {
                     FixOutcome::Restarted => {
                         self.t_last_fix = Some(t_meas);
                         self.consecutive_fixes = 1;
+                        self.slot.trail.clear();
                     }
                     FixOutcome::Rejected => self.consecutive_fixes = 0,
                 }
@@ -987,9 +999,22 @@ impl FollowerPlanner {
             Vector3::zeros()
         };
         self.slot.last_shift = shift;
-        let arm = from_level(yaw_parent, &filtered);
-        let vel =
-            v_parent + Vector3::z().cross(&arm) * r_parent + from_level(yaw_parent, &slot_rate);
+        // the rigid slot (the paper's), or the point of the parent's path the slot's
+        // length behind it, offset across in the parent's heading there (`trail`)
+        let (anchor, yaw_slot, arm, vel) = if self.cfg.trail && filtered.x < 0.0 {
+            self.slot.trail.push(p_parent, yaw_parent);
+            let (q, yaw_q) = self.slot.trail.behind(p_parent, yaw_parent, -filtered.x);
+            let arm = from_level(yaw_q, &Vector3::new(0.0, filtered.y, filtered.z));
+            let speed = v_parent.xy().norm();
+            let along = Vector3::new(yaw_q.cos(), yaw_q.sin(), 0.0) * speed;
+            let vel = along + Vector3::z() * v_parent.z + from_level(yaw_q, &slot_rate);
+            (q, yaw_q, arm, vel)
+        } else {
+            let arm = from_level(yaw_parent, &filtered);
+            let vel =
+                v_parent + Vector3::z().cross(&arm) * r_parent + from_level(yaw_parent, &slot_rate);
+            (p_parent, yaw_parent, arm, vel)
+        };
         // headway: v̄ is kept in the parent's level frame, so that a steady turn is steady
         let v_level = to_level(yaw_parent, &vel);
         let gain = (dt / self.cfg.headway_avg_s).min(1.0);
@@ -1014,8 +1039,8 @@ impl FollowerPlanner {
         }
         self.slot.headway_mean = Some((mean_v, mean_r));
         let headway = (v_own - from_level(yaw_parent, &mean_v)) * self.cfg.headway_s;
-        let (pos, vel) = self.keep_clear(p_parent + arm - headway, vel, yaw_parent);
-        let yaw = wrap(yaw_parent - self.cfg.yaw_headway_s * (r_own - mean_r));
+        let (pos, vel) = self.keep_clear(anchor + arm - headway, vel, yaw_slot);
+        let yaw = wrap(yaw_slot - self.cfg.yaw_headway_s * (r_own - mean_r));
         let yaw = self.keep_in_view(yaw, yaw_own, &p_parent, yaw_parent);
         self.last_target_odo = Some((pos, vel, yaw));
         let returning = (filtered - self.slot.disp.slot).norm() > 0.05;
@@ -1166,6 +1191,27 @@ mod tests {
                 // slowing linearly over coast_s
                 let f = 1.0 - (age - slow_from - DT) / cfg.coast_s;
                 assert!((v - f).abs() < 0.06, "age {age}: {v} m/s, want {f}");
+            }
+        }
+    }
+
+    /// On a straight leg the trail's slot is the rigid one: the same targets, step by
+    /// step, once the trail is longer than the slot.
+    #[test]
+    fn on_a_straight_leg_the_trail_is_the_rigid_slot() {
+        let rigid = FollowerConfig::default();
+        let trail = FollowerConfig {
+            trail: true,
+            ..FollowerConfig::default()
+        };
+        let (mut a, mut b) = (World::new(&rigid), World::new(&trail));
+        for i in 0..300 {
+            let (oa, ob) = (a.step(true), b.step(true));
+            if i > 150 {
+                let d = (oa.target.position_m - ob.target.position_m).norm();
+                assert!(d < 0.05, "step {i}: {d} m apart");
+                assert!((a.me - (parent_at(a.t) + a.slot)).norm() < 0.1);
+                assert!((b.me - (parent_at(b.t) + b.slot)).norm() < 0.1);
             }
         }
     }

@@ -59,6 +59,7 @@ pub mod nav_filter;
 pub mod node;
 pub mod observer;
 pub mod shift;
+pub mod trail;
 mod types;
 pub mod view;
 
