@@ -270,19 +270,7 @@ fn walls(b: &mut Builder<'_>, s0: f64) -> String {
     let half = len / 2.0;
     let hg = half_gap(b);
     let w = b.wall_half_width_for(0.0, hg);
-    let (sn, cs) = (a.to_radians().sin(), a.to_radians().cos());
-    // each wall's inner face comes no nearer the track than hg
-    let off = hg + half * sn + w * cs;
-    let mid = s0 + half;
-    if funnel {
-        b.wall(mid, -off, half, w, -a);
-        b.wall(mid, off, half, w, a);
-    } else {
-        let rot = b.sign() * a;
-        b.wall(mid, -off, half, w, rot);
-        b.wall(mid, off, half, w, rot);
-    }
-    b.gates += 1;
+    b.angled_pair(s0 + half, half, hg, w, a, funnel);
     format!(
         "a {} at {a:.0}°, {:.1} m wide",
         if funnel { "funnel" } else { "skewed channel" },

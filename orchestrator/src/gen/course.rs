@@ -350,6 +350,32 @@ impl<'a> Builder<'a> {
         self.wall_half_width_for(e, self.g.half_gap_m)
     }
     /// [`Self::wall_half_width`] for a gap of half width `hg`.
+    /// Two walls of half length `half` and half width `w` at `a`° to the track, centred
+    /// `mid` along it, whose inner faces come no nearer the track than `hg`: a funnel
+    /// (port wall turned out at its front, −a, starboard +a) or a channel skewed to a side
+    /// drawn here.
+    pub(super) fn angled_pair(
+        &mut self,
+        mid: f64,
+        half: f64,
+        hg: f64,
+        w: f64,
+        a: f64,
+        funnel: bool,
+    ) {
+        let (sn, cs) = (a.to_radians().sin(), a.to_radians().cos());
+        let off = hg + half * sn + w * cs;
+        if funnel {
+            self.wall(mid, -off, half, w, -a);
+            self.wall(mid, off, half, w, a);
+        } else {
+            let rot = self.sign() * a;
+            self.wall(mid, -off, half, w, rot);
+            self.wall(mid, off, half, w, rot);
+        }
+        self.gates += 1;
+    }
+
     pub(super) fn wall_half_width_for(&self, e: f64, hg: f64) -> f64 {
         ((self.g.outer_m + WALL_OVERHANG_M + e.abs() - hg) / 2.0).max(MIN_WALL_HALF_WIDTH_M)
     }
@@ -614,21 +640,7 @@ pub fn build(family: Family, g: Geom, seed: u64, with: &[super::Feature]) -> Cou
             b.straight_to(s0 + len + 5.0);
             let half = len / 2.0;
             let w = b.wall_half_width(0.0);
-            let hg = g.half_gap_m;
-            let (sn, cs) = (a.to_radians().sin(), a.to_radians().cos());
-            // each wall's inner face comes no nearer the track than hg
-            let off = hg + half * sn + w * cs;
-            let mid = s0 + half;
-            if funnel {
-                // port wall turned out at its front (−a), starboard (+a)
-                b.wall(mid, -off, half, w, -a);
-                b.wall(mid, off, half, w, a);
-            } else {
-                let rot = b.sign() * a;
-                b.wall(mid, -off, half, w, rot);
-                b.wall(mid, off, half, w, rot);
-            }
-            b.gates += 1;
+            b.angled_pair(s0 + half, half, g.half_gap_m, w, a, funnel);
             if funnel {
                 format!("a funnel of walls at {a:.0}° to the track")
             } else {
