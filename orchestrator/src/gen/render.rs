@@ -286,13 +286,6 @@ pub(super) fn render_settings(t: &mut String, p: &Plan) -> std::fmt::Result {
         writeln!(t)?;
     }
     writeln!(t, "[follower]")?;
-    if p.course
-        .as_ref()
-        .is_some_and(|c| c.family == super::Family::Composed)
-    {
-        // turns to 180°: each file swims its parent's path, offset
-        writeln!(t, "trail = true")?;
-    }
     writeln!(t, "memory_behind_m = {}", num(p.memory_behind_m))?;
     writeln!(t, "memory_max_age_s = {}", num(p.memory_max_age_s))?;
     writeln!(
