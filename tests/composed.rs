@@ -97,3 +97,38 @@ fn with_needs_a_composed_course() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("--with needs --course composed"), "{err}");
 }
+
+/// Know before you go (issue 45): `shoal check` says the narrowest gap the
+/// formation passes at the safe distance and the narrowest opening on the
+/// route, and warns when the route's is narrower: the paper's passage is
+/// 8 m, as narrow as its five pass; walls 2 m nearer the track make it 4 m.
+#[test]
+fn check_warns_of_an_opening_narrower_than_the_formation_passes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let paper = std::fs::read_to_string(repo_root().join("scenarios/paper.toml")).unwrap();
+    let o = run_shoal_ok(&[
+        "check",
+        repo_root().join("scenarios/paper.toml").to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(
+        said.contains("narrowest gap it passes at the safe distance (2 m): 8.0 m"),
+        "{said}"
+    );
+    assert!(
+        said.contains("route: narrowest opening 8.0 m wide"),
+        "{said}"
+    );
+    assert!(!said.contains("warning: the route passes"), "{said}");
+    let narrow = paper
+        .replace("[70.0, -9.0, 10.0]", "[70.0, -7.0, 10.0]")
+        .replace("[70.0, 9.0, 10.0]", "[70.0, 7.0, 10.0]");
+    let file = tmp.path().join("narrow.toml");
+    std::fs::write(&file, narrow).unwrap();
+    let o = run_shoal_ok(&["check", file.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(
+        said.contains("warning: the route passes an opening 4.0 m wide"),
+        "{said}"
+    );
+}

@@ -48,6 +48,18 @@ pub fn run(path: Option<PathBuf>, resolved: bool, hosts: Option<PathBuf>) -> any
             println!(
                 "  formation {full:.1} m wide; narrowest gap it passes at the safe distance ({d_min} m): {narrowest:.1} m"
             );
+            if let Some(o) = preflight::narrowest_opening(&s)? {
+                println!(
+                    "  route: narrowest opening {:.1} m wide, {:.0} m along",
+                    o.width_m, o.along_m
+                );
+                if o.width_m < narrowest {
+                    println!(
+                        "warning: the route passes an opening {:.1} m wide {:.0} m along, narrower than the {narrowest:.1} m this formation passes at the safe distance: a gap in a wall that narrow will bring files within the safe distance (between separate obstacles, files may pass on either side)",
+                        o.width_m, o.along_m
+                    );
+                }
+            }
         }
     }
     for line in preflight::advice(&s) {

@@ -463,6 +463,42 @@ mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
     use super::*;
 
+    /// The paper's passage is the 8 m between its two walls, 60 m along the
+    /// route (the walls' near ends); walls 2 m nearer the track make it 4 m;
+    /// a cylinder on the route closes it; no obstacles, no opening.
+    #[test]
+    fn narrowest_opening_is_the_papers_passage() {
+        let paper = include_str!("../../../scenarios/paper.toml");
+        let s = Scenario::from_toml(paper).unwrap();
+        let o = narrowest_opening(&s).unwrap().unwrap();
+        assert!((o.width_m - 8.0).abs() < 1e-6, "{o:?}");
+        assert!((60.0..=80.0).contains(&o.along_m), "{o:?}");
+        let narrow = paper
+            .replace("[70.0, -9.0, 10.0]", "[70.0, -7.0, 10.0]")
+            .replace("[70.0, 9.0, 10.0]", "[70.0, 7.0, 10.0]");
+        let o = narrowest_opening(&Scenario::from_toml(&narrow).unwrap())
+            .unwrap()
+            .unwrap();
+        assert!((o.width_m - 4.0).abs() < 1e-6, "{o:?}");
+        let blocked = format!(
+            "{paper}
+[[obstacles]]
+kind = \"cylinder\"
+center_ned_m = [120.0, 0.0, 10.0]
+radius_m = 0.5
+half_height_m = 10.0
+"
+        );
+        let o = narrowest_opening(&Scenario::from_toml(&blocked).unwrap())
+            .unwrap()
+            .unwrap();
+        assert_eq!(o.width_m, 0.0, "{o:?}");
+        assert!((o.along_m - 120.0).abs() <= 1.0, "{o:?}");
+        let mut open = Scenario::from_toml(paper).unwrap();
+        open.obstacles.clear();
+        assert_eq!(narrowest_opening(&open).unwrap(), None);
+    }
+
     #[test]
     fn every_range_checks_a_number_of_a_full_scenario() {
         let paper = include_str!("../../../scenarios/paper.toml");
@@ -652,4 +688,74 @@ duration_s = 1.0
             assert!(v.d_a_m.is_some() && v.d_b_m.is_some(), "{}", v.name);
         }
     }
+}
+
+/// The narrowest opening the leader's route passes through: at a point of
+/// the route, obstacles on both sides of it, measured across it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Opening {
+    /// From the obstacle to port to the one to starboard, m.
+    pub width_m: f64,
+    /// How far along the route, m.
+    pub along_m: f64,
+}
+
+/// Farthest an obstacle abeam counts as a side of an opening, m.
+pub const OPENING_REACH_M: f64 = 150.0;
+
+/// The narrowest opening on the leader's route (its start, then its
+/// waypoints), sampled every metre: horizontal rays to port and starboard,
+/// square to the route, at the route's depth. `None` without obstacles on
+/// both sides anywhere. A point of the route inside an obstacle gives 0.
+pub fn narrowest_opening(s: &Scenario) -> anyhow::Result<Option<Opening>> {
+    let obstacles: Vec<sonar::Obstacle> = s.obstacles_as()?;
+    if obstacles.is_empty() {
+        return Ok(None);
+    }
+    let field = sonar::ObstacleField::new(&obstacles)?;
+    let mission: planner::LeaderConfig = s.section("mission")?;
+    let starts = s.start_poses();
+    let Some((start, _)) = starts.get(&s.leader().name) else {
+        return Ok(None);
+    };
+    let mut route = vec![nalgebra::Vector3::from(*start)];
+    route.extend(
+        mission
+            .waypoints_ned_m
+            .iter()
+            .map(|w| nalgebra::Vector3::from(*w)),
+    );
+    let mut best: Option<Opening> = None;
+    let mut along = 0.0;
+    for leg in route.windows(2) {
+        let d = leg[1] - leg[0];
+        let len = d.xy().norm();
+        if len < 1e-9 {
+            continue;
+        }
+        // square to the leg, to starboard (NED: north → east)
+        let across = nalgebra::Unit::new_normalize(nalgebra::Vector3::new(-d.y, d.x, 0.0));
+        let mut k = 0.0;
+        while k <= len {
+            let p = nalgebra::Point3::from(leg[0] + d * (k / len));
+            let starboard = field.cast_ray(&p, &across, OPENING_REACH_M);
+            let port = field.cast_ray(&p, &-across, OPENING_REACH_M);
+            if let (Some(a), Some(b)) = (port, starboard) {
+                let width_m = if field.distance(&p) <= 0.0 {
+                    0.0
+                } else {
+                    a + b
+                };
+                if best.is_none_or(|o| width_m < o.width_m) {
+                    best = Some(Opening {
+                        width_m,
+                        along_m: along + k,
+                    });
+                }
+            }
+            k += 1.0;
+        }
+        along += len;
+    }
+    Ok(best)
 }
