@@ -10,7 +10,9 @@
 //! * **Turns** of 20-100°, and **U-turns** of 100-180° (two half turns a
 //!   short leg apart, as a leader flies them); **S-bends** of 20-60° and back.
 //! * **Fields** of 3-7 cylinders or spheres of radius 0.3-1.5 m across the
-//!   formation's width, each pair at least a drawn gap apart.
+//!   formation's width, each pair at least a drawn gap apart; a sphere's
+//!   centre within half its radius of the route's depth (a horizontal sonar
+//!   sees only a sliver of one well above or below its plane).
 //! * **Walls at any angle**: a funnel or a skewed channel at 5-45° to the
 //!   track.
 //! * **Depth changes** of 3-8 m over 40 m.
@@ -21,7 +23,11 @@
 //! Features are laid out in order with the room the presets use (a gap
 //! [`super::course::TURN_CLEAR_M`] past a turn's arc, a turn a group's length past a gap).
 //! A draw whose solids come near the route away from their own feature (a
-//! U-turn's return leg past an earlier wall) is drawn again.
+//! U-turn's return leg past an earlier wall) is drawn again. Every course
+//! has at least one feature with solids; `--with` puts the features asked
+//! for in slots drawn at random. The rendered file carries a forward-looking
+//! multibeam (`[sonar] multibeam`, 16 cones over 120°): with obstacles down
+//! to 0.3 m the paper's four 7° cones leave too much of the track unseen.
 
 use serde::{Deserialize, Serialize};
 use sim_plant::current::CurrentZone;
