@@ -110,15 +110,8 @@ pub const SPACE_LARGE_SHARE: f64 = 0.35;
 /// ([`SPACE_LARGE_SHARE`]) or 5-14; the paper's five on a fifth of the small
 /// groups, else triangle, V, column or grid.
 pub fn draw_formation(course_seed: u64) -> (Shape, usize, shoal_scenario::CameraModel) {
-    let mut z = course_seed ^ 0x464F_524D_4154;
-    let mut unit = || {
-        // SplitMix64
-        z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut x = z;
-        x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((x ^ (x >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = gen::SplitMix(course_seed ^ 0x464F_524D_4154);
+    let mut unit = || rng.unit();
     let images = unit() < SPACE_IMAGE_SHARE;
     let large = !images && unit() < SPACE_LARGE_SHARE / (1.0 - SPACE_IMAGE_SHARE);
     let camera = if images {
