@@ -1,5 +1,5 @@
 //! The foundation, end to end with real processes: a run records every
-//! channel so the official readers decode it; lockstep is deterministic;
+//! channel so the official readers (and Rerun's importer) decode it; lockstep is deterministic;
 //! SIGINT leaves nothing behind; two runs never cross; bad scenarios are
 //! refused before anything starts; the perception rule holds on the live
 //! service graph; the recorder's drop count is honest.
@@ -97,6 +97,23 @@ fn paper_run_records_every_channel_and_the_official_readers_decode_it() {
         .unwrap()
         .iter()
         .any(|t| t == "shoal_msgs/msg/Truth"));
+    // A third importer, Rerun's (PyPI `rerun-sdk`: `rerun mcap convert`): it resolves
+    // nested types only by the `MSG: pkg/Type` sections rosbag2 writes, and keeps a
+    // channel it cannot resolve as raw bytes. Every channel is decoded into a struct
+    // with every field of its schema.
+    let rr = python()
+        .arg(repo_root().join("tests/python/check_rerun.py"))
+        .arg(out.join("recording.mcap"))
+        .output()
+        .unwrap();
+    assert!(
+        rr.status.success(),
+        "Rerun's importer failed: {}",
+        String::from_utf8_lossy(&rr.stderr)
+    );
+    let rr: serde_json::Value = serde_json::from_slice(&rr.stdout).unwrap();
+    let with_messages = counts.values().filter(|n| **n > 0).count();
+    assert_eq!(rr["channels"].as_u64(), Some(with_messages as u64), "{rr}");
     let truth = rec.samples::<ipc_types::Truth>("/F2/truth");
     let s5 = truth.iter().find(|t| t.header.seq == 5).unwrap();
     let py_pos: Vec<f64> = report["samples"]["/F2/truth"]["position_ned_m"]

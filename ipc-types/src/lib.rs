@@ -1164,8 +1164,8 @@ mod tests {
     fn nested_types_get_msg_sections() {
         let text = schema::ros2msg_schema::<World>().unwrap();
         assert!(text.contains("shoal_msgs/VehiclePose[256] vehicles"));
-        assert!(text.contains("MSG: shoal_msgs/msg/VehiclePose\nfloat64[3] position_ned_m"));
-        assert!(text.contains("MSG: shoal_msgs/msg/Header\nuint64 seq"));
+        assert!(text.contains("MSG: shoal_msgs/VehiclePose\nfloat64[3] position_ned_m"));
+        assert!(text.contains("MSG: shoal_msgs/Header\nuint64 seq"));
     }
 
     #[test]

@@ -53,8 +53,8 @@ pub trait FieldType {
 
 /// A struct that describes its fields (every sample type and nested type).
 pub trait Described {
-    /// ROS 2 resource name, `shoal_msgs/msg/Name` (the MCAP schema name
-    /// and the `MSG:` header; fields name it `shoal_msgs/Name`).
+    /// ROS 2 resource name, `shoal_msgs/msg/Name` (the MCAP schema name; fields and
+    /// the `MSG:` headers name it `shoal_msgs/Name`, as rosbag2 does).
     const ROS_NAME: &'static str;
     /// True for a type that measures the machine rather than the simulation
     /// (the runtime statistics): every field after the first (the header)
@@ -181,7 +181,9 @@ fn collect_nested(
 }
 
 /// The ros2msg schema text of `T`: its fields, then one `MSG:` section per
-/// nested type, as the official MCAP ROS 2 readers expect.
+/// nested type, headed `MSG: pkg/Type` as rosbag2 writes it (Rerun's MCAP importer
+/// resolves nested types only by that name; the official MCAP ROS 2 readers and
+/// rosbags accept it too).
 pub fn ros2msg_schema<T: Described>() -> Result<String, SchemaError> {
     let fields = T::fields();
     let mut nested = Vec::new();
@@ -194,7 +196,7 @@ pub fn ros2msg_schema<T: Described>() -> Result<String, SchemaError> {
         text.push_str(
             "================================================================================\n",
         );
-        let _ = writeln!(text, "MSG: {name}");
+        let _ = writeln!(text, "MSG: {}", field_type_name(name));
         for f in &fields {
             let _ = writeln!(text, "{} {}", type_line(&f.ty), f.name);
         }
