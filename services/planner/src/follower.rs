@@ -21,6 +21,9 @@ const HISTORY_CAPACITY: usize = 64;
 /// ParentLost: the follower turns toward the parent's last known position only if that is
 /// farther than this horizontally, m.
 const LOOK_MIN_RANGE_M: f64 = 1.0;
+/// On a trail, the line of sight to the parent sets the heading only when it is longer
+/// than this horizontally, m (shorter, its noise would swing the heading).
+const TRAIL_SIGHT_MIN_M: f64 = 2.0;
 
 /// Follower planner configuration (`[follower]` in a scenario; the slot and `d_a_m`/`d_b_m`
 /// are per vehicle).
@@ -152,12 +155,11 @@ pub struct FollowerConfig {
     /// [`ObserverParams::coordinated_turn`]).
     pub coordinated_turn: bool,
     /// The slot's along-track part is a distance along the parent's path, not along its
-    /// heading now (default false: the paper's rigid slot). In a turn a rigid slot swings
-    /// across the track by its length times the turn, more at every level, and files fold
-    /// onto each other; with a trail each follower swims its parent's path offset sideways
-    /// ([`crate::trail`]). Off everywhere: on 60 held-back composed courses it passed 30
-    /// (a follower heading along its parent's past path loses the parent from view in
-    /// turns), where it had mended the two S-bends it was tried on.
+    /// heading now (default true; false: the paper's rigid slot). In a turn a rigid slot
+    /// swings across the track by its length times the turn, more at every level, and files
+    /// fold onto each other; with a trail each follower swims its parent's path offset
+    /// sideways ([`crate::trail`]), heading so that it sees its parent where the rigid slot
+    /// shows it.
     pub trail: bool,
 }
 
@@ -194,7 +196,7 @@ impl Default for FollowerConfig {
             search_s: 10.0,
             memory_cell_m: 0.5,
             coordinated_turn: true,
-            trail: false,
+            trail: true,
             view_half_angle_deg: 45.0,
             camera_mount_body_m: [1.4, 0.0, 0.0],
             parent_beacons_body_m: vec![
@@ -1001,16 +1003,23 @@ impl FollowerPlanner {
             Vector3::zeros()
         };
         self.slot.last_shift = shift;
-        // the rigid slot (the paper's), or the point of the parent's path the slot's
-        // length behind it, offset across in the parent's heading there (`trail`)
+        // the rigid slot (the paper's), or the slot bent along the parent's path (`trail`):
+        // its along-track arm on the chord from where the parent was the arm's length back
+        // (heading `ψ_q` there) to where it is now, its lateral and vertical parts square
+        // to the path there (`crate::trail`)
         let (anchor, yaw_slot, arm, vel) = if self.cfg.trail && filtered.x < 0.0 {
             self.slot.trail.push(p_parent, yaw_parent);
-            let (q, yaw_q) = self.slot.trail.behind(p_parent, yaw_parent, -filtered.x);
-            let arm = from_level(yaw_q, &Vector3::new(0.0, filtered.y, filtered.z));
+            let (_, yaw_q) = self.slot.trail.behind(p_parent, yaw_parent, -filtered.x);
+            let yaw_chord = wrap(yaw_parent - 0.5 * wrap(yaw_parent - yaw_q));
+            let across = from_level(yaw_q, &Vector3::new(0.0, filtered.y, filtered.z));
+            let arm = from_level(yaw_chord, &Vector3::new(filtered.x, 0.0, 0.0)) + across;
             let speed = v_parent.xy().norm();
             let along = Vector3::new(yaw_q.cos(), yaw_q.sin(), 0.0) * speed;
-            let vel = along + Vector3::z() * v_parent.z + from_level(yaw_q, &slot_rate);
-            (q, yaw_q, arm, vel)
+            let vel = along
+                + Vector3::z() * v_parent.z
+                + Vector3::z().cross(&across) * r_parent
+                + from_level(yaw_q, &slot_rate);
+            (p_parent, yaw_q, arm, vel)
         } else {
             let arm = from_level(yaw_parent, &filtered);
             let vel =
@@ -1041,8 +1050,23 @@ impl FollowerPlanner {
         }
         self.slot.headway_mean = Some((mean_v, mean_r));
         let headway = (v_own - from_level(yaw_parent, &mean_v)) * self.cfg.headway_s;
+        // On a trail the heading is the one that shows the parent where the rigid slot
+        // shows it (the slot's own bearing, `atan2(−s_y, −s_x)`, off the line of sight):
+        // heading along the past path instead turns the parent by about `L/R` in the image
+        // in a turn of radius R, out of view at the formation's margins. On a straight leg
+        // it is the parent's heading, as the rigid slot's.
+        let yaw_view = if self.cfg.trail && filtered.x < 0.0 {
+            let sight = p_parent - (anchor + arm);
+            if sight.xy().norm() > TRAIL_SIGHT_MIN_M {
+                wrap(sight.y.atan2(sight.x) - (-filtered.y).atan2(-filtered.x))
+            } else {
+                yaw_slot
+            }
+        } else {
+            yaw_slot
+        };
         let (pos, vel) = self.keep_clear(anchor + arm - headway, vel, yaw_slot);
-        let yaw = wrap(yaw_slot - self.cfg.yaw_headway_s * (r_own - mean_r));
+        let yaw = wrap(yaw_view - self.cfg.yaw_headway_s * (r_own - mean_r));
         let yaw = self.keep_in_view(yaw, yaw_own, &p_parent, yaw_parent);
         self.last_target_odo = Some((pos, vel, yaw));
         let returning = (filtered - self.slot.disp.slot).norm() > 0.05;
@@ -1201,11 +1225,11 @@ mod tests {
     /// step, once the trail is longer than the slot.
     #[test]
     fn on_a_straight_leg_the_trail_is_the_rigid_slot() {
-        let rigid = FollowerConfig::default();
-        let trail = FollowerConfig {
-            trail: true,
+        let rigid = FollowerConfig {
+            trail: false,
             ..FollowerConfig::default()
         };
+        let trail = FollowerConfig::default();
         let (mut a, mut b) = (World::new(&rigid), World::new(&trail));
         for i in 0..300 {
             let (oa, ob) = (a.step(true), b.step(true));

@@ -40,6 +40,7 @@ pub fn follower_config(scenario: &Scenario, name: &str) -> anyhow::Result<Follow
         cfg.search_s = 0.0;
         cfg.memory_cell_m = 0.0;
         cfg.coordinated_turn = false;
+        cfg.trail = false;
     }
     cfg.d_a_m = spec
         .d_a_m

@@ -6,19 +6,28 @@
 //! track by `|s_x|·Δψ`; a follower of a follower adds its own swing, so deep files cut a
 //! corner by more than a shallow one beside them and neighbouring files cross (measured on
 //! composed courses: columns of 11-50 through 50-150° turns came within 0.2-1.96 m, where
-//! passages kept 2.5 m). With a trail the slot's along-track part is a distance along the
-//! parent's path: the target is the point of the path `|s_x|` behind the parent, `s_y`
-//! across it in the parent's heading *there*, `s_z` below:
+//! passages kept 2.5 m). With a trail the slot bends along the parent's path: its
+//! along-track arm lies on the chord from where the parent was the arm's length back along
+//! its path (heading `ψ_q` there) to where it is now, its lateral and vertical parts square
+//! to the path there:
 //!
 //! ```text
-//!   target = q(L) + R(ψ_q(L))·(0, s_y, s_z),   L = −s_x,
+//!   target = p + R(ψ_c)·(s_x, 0, 0) + R(ψ_q)·(0, s_y, s_z),   ψ_c = ψ − (ψ − ψ_q)/2,
 //! ```
 //!
-//! with `q(L)` the trail at arc length `L` back from the parent and `ψ_q` the parent's
-//! heading when it was there. Each file then swims its parent's path offset sideways, as
-//! on a straight leg (where the two are the same point), and a turn does not fold files
-//! onto each other. Where the trail is shorter than `L` (the start) it is carried straight
-//! back along its oldest heading. A slot ahead of its parent (`s_x ≥ 0`) stays rigid.
+//! with `ψ_q` the parent's heading at arc length `L = −s_x` back along its trail. In a
+//! steady turn of radius `R` the chord's end is the point of the path `L` back (to
+//! `L·(L/R)²/24`), so each file swims its parent's path offset sideways and a turn does not
+//! fold files onto each other; on a straight leg `ψ_q = ψ` and the target is the rigid
+//! slot's, also while the parent moves sideways (a trail of positions would replay that
+//! move `L` later: measured on the paper scenario, its followers' clearance fell from 1.85
+//! to 1.72 m and the after-passage slot RMS rose from 0.22 to 0.28 m). The follower heads
+//! so that it sees its parent where the rigid slot shows it. The target's velocity is the
+//! parent's speed along its path at the trail point (heading `ψ_q`), without the sideways
+//! part of the parent's velocity: a file then passes a parent's swerve on without
+//! amplifying it even without the headway (`tests/string.rs`). Where the trail is shorter
+//! than `L` (the start) it is carried straight back along its oldest heading. A slot ahead
+//! of its parent (`s_x ≥ 0`) stays rigid.
 //!
 //! Only estimates are stored (the planner's observer of its parent, in the follower's
 //! odometry frame): no truth. Points closer than [`STEP_M`] to the last are not stored,

@@ -539,3 +539,101 @@ fn lost_parent_turns_toward_its_last_bearing_and_reacquires() {
     }
     assert_ne!(mode, Mode::ParentLost);
 }
+
+/// A parent that swims 40 m north, then turns to starboard on a circle of `radius`
+/// (heading `yaw`), at 1 m/s.
+fn turning_parent(t: f64, radius: f64) -> (Vector3<f64>, f64) {
+    let straight = 40.0;
+    let s = SPEED * t;
+    if s <= straight {
+        return (Vector3::new(s, 0.0, DEPTH), 0.0);
+    }
+    let th = (s - straight) / radius;
+    (
+        Vector3::new(
+            straight + radius * th.sin(),
+            radius * (1.0 - th.cos()),
+            DEPTH,
+        ),
+        th,
+    )
+}
+
+/// The follower of a parent in a steady turn of 20 m radius, with a perfect controller
+/// that also takes the heading it is given: where it swims and where it sees its parent.
+/// Returns, over the last 20 s, the largest distance of the follower from the circle its
+/// slot's lateral offset puts it on, and the largest change of its parent's bearing in its
+/// body frame from the steady formation's.
+fn steady_turn(slot: [f64; 3], trail: bool) -> (f64, f64) {
+    let radius = 20.0;
+    let cfg = FollowerConfig {
+        slot_in_parent_m: slot,
+        trail,
+        ..FollowerConfig::default()
+    };
+    let mut planner = FollowerPlanner::new(&cfg).unwrap();
+    let mut me = Vector3::from(slot) + Vector3::new(0.0, 0.0, DEPTH);
+    let (mut yaw, mut vel) = (0.0f64, Vector3::new(SPEED, 0.0, 0.0));
+    let nominal = (-slot[1]).atan2(-slot[0]);
+    let (mut off_path, mut off_bearing) = (0.0f64, 0.0f64);
+    let steps = 1000; // 40 m straight, then 60 m (170°) of turn
+    for i in 0..steps {
+        let t = f64::from(i) * DT;
+        let (p, yaw_p) = turning_parent(t, radius);
+        let rel = pose(&me, yaw).inverse() * pose(&p, yaw_p);
+        let att = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
+        let nu = att.inverse() * vel;
+        let out = planner
+            .step(&FollowerInput {
+                t_s: t,
+                attitude: att,
+                nu: Vector6::new(nu.x, nu.y, nu.z, 0.0, 0.0, 0.0),
+                depth_m: me.z,
+                pose: Some(PoseMeasurement {
+                    t_s: t,
+                    parent_in_body: rel,
+                    covariance: Matrix6::identity() * 0.01,
+                    valid: true,
+                }),
+                sonar: None,
+            })
+            .unwrap();
+        if i >= steps - 200 {
+            // distance from the circle of radius `radius − s_y` about the turn's centre
+            let centre = Vector3::new(40.0, radius, DEPTH);
+            let r = (me - centre).xy().norm();
+            off_path = off_path.max((r - (radius - slot[1])).abs());
+            let bearing = rel.translation.vector.y.atan2(rel.translation.vector.x);
+            off_bearing = off_bearing.max((bearing - nominal).abs());
+        }
+        let next = me + att * out.target.position_m + att * out.target.velocity_mps * DT;
+        vel = (next - me) / DT;
+        me = next;
+        yaw += out.target.yaw_rel_rad;
+    }
+    (off_path, off_bearing.to_degrees())
+}
+
+/// In a turn a rigid slot 8 m behind swings outward off its parent's path (by
+/// `√(R² + 8²) − R`, 1.6 m at 20 m radius, and one level more for each follower of a
+/// follower); on the trail the follower swims the parent's path, and it sees its parent
+/// where the steady formation shows it.
+#[test]
+fn in_a_steady_turn_the_trail_keeps_the_parents_path_and_its_bearing() {
+    for slot in [[-8.0, 0.0, 0.0], [-8.0, 4.0, 0.0], [-8.0, -4.0, 0.0]] {
+        let (rigid_off, rigid_bearing) = steady_turn(slot, false);
+        let (trail_off, trail_bearing) = steady_turn(slot, true);
+        assert!(
+            rigid_off > 1.0,
+            "{slot:?}: rigid slot {rigid_off} m off the path"
+        );
+        assert!(
+            trail_off < 0.3,
+            "{slot:?}: trail {trail_off} m off the path"
+        );
+        assert!(
+            trail_bearing < 4.0,
+            "{slot:?}: parent {trail_bearing}° off its steady bearing (rigid {rigid_bearing}°)"
+        );
+    }
+}
