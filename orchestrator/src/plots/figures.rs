@@ -35,9 +35,9 @@ where
     DB::ErrorType: 'static,
 {
     for (k, s) in series {
-        let name = d.tracks[*k].name.as_str();
-        curve(c, leg, s.iter().copied(), d.colour(*k), 3, Some(name))?;
+        curve(c, leg, s.iter().copied(), d.colour(*k), 3, d.label(*k))?;
     }
+    d.file_legend(leg);
     Ok(())
 }
 
@@ -248,6 +248,7 @@ where
     // What the vertical shift asks for: D_b/2 × the progress toward the
     // parent's track (eq. 5), filtered (eq. 9); a shift that stops part-way
     // asks for part of D_b/2.
+    let mut any_asked = false;
     for (k, pts) in &d.depth_commands {
         if pts.is_empty() {
             continue;
@@ -259,9 +260,18 @@ where
             6,
             col.stroke_width(2),
         ))?;
+        match d.label(*k) {
+            Some(name) => leg.push((
+                format!("{name} depth asked (eq. 5)"),
+                Key::Dashed(col, 2, 7, 4),
+            )),
+            None => any_asked = true,
+        }
+    }
+    if any_asked {
         leg.push((
-            format!("{} depth asked (eq. 5)", d.tracks[*k].name),
-            Key::Dashed(col, 2, 7, 4),
+            "depth asked (eq. 5)".to_string(),
+            Key::Dashed(GREY_500, 2, 7, 4),
         ));
     }
     draw_legend(&legend_area, &leg)
@@ -326,7 +336,7 @@ where
 {
     for (k, t) in d.tracks.iter().enumerate() {
         let col = d.colour(k);
-        curve(c, leg, t.p.iter().map(&map), col, 3, Some(&t.name))?;
+        curve(c, leg, t.p.iter().map(&map), col, 3, d.label(k))?;
         if let (Some(a), Some(b)) = (t.p.first(), t.p.last()) {
             c.draw_series(std::iter::once(
                 EmptyElement::at(map(a)) + Circle::new((0, 0), 7, col.filled()),
@@ -336,6 +346,7 @@ where
             ))?;
         }
     }
+    d.file_legend(leg);
     leg.push(("start".to_string(), Key::Dot(GREY_500)));
     leg.push(("end".to_string(), Key::Square(GREY_500)));
     Ok(())
@@ -510,6 +521,8 @@ where
     let x = time_range(d);
     let (mut c, mut leg) = time_axes(&plot, d, &y, "distance between the two vehicles (m)")?;
     let n = pairs.len();
+    // a pair per legend row up to a dozen; beyond, one row says how many
+    let named = n <= colours::MAX_NAMED_VEHICLES;
     for (k, (label, s)) in pairs.iter().enumerate() {
         curve(
             &mut c,
@@ -517,8 +530,11 @@ where
             s.iter().copied(),
             pair_colour(k, n),
             2,
-            Some(label),
+            named.then_some(label.as_str()),
         )?;
+    }
+    if !named {
+        leg.push((format!("{n} pairs, one line each"), Key::Line(GREY_500, 2)));
     }
     safe_line(&mut c, &mut leg, d, &x, true)?;
     draw_legend(&legend_area, &leg)

@@ -24,6 +24,7 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 use recordings::Recording;
 
 mod campaign;
+pub mod colours;
 mod compare;
 mod figures;
 pub(crate) mod geometry;
@@ -34,6 +35,8 @@ pub use compare::write_compare_plot;
 #[cfg(test)]
 use compare::COMPARE_TITLE;
 pub(crate) use style::*;
+
+use colours::{Colouring, VEHICLE_COLOURS};
 
 use figures::*;
 use geometry::*;
@@ -62,20 +65,6 @@ const HEIGHT: u32 = 900;
 const MARGIN: u32 = 20;
 const X_LABEL_AREA: u32 = 70;
 const Y_LABEL_AREA: u32 = 90;
-
-/// Vehicle colours: the leader black, then the tab10 palette.
-const VEHICLE_COLOURS: [RGBColor; 10] = [
-    RGBColor(0, 0, 0),
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(23, 190, 207),
-    RGBColor(188, 189, 34),
-];
 
 #[derive(Debug, Clone, Copy)]
 enum Fig {
@@ -187,6 +176,8 @@ struct Data {
     /// planner asks for (the parent's depth plus the filtered slot's z,
     /// eqs. (5), (9)) against its own north, m.
     depth_commands: Vec<(usize, Vec<(f64, f64)>)>,
+    /// Vehicle by vehicle, or by file for a large group ([`colours`]).
+    colouring: Colouring,
 }
 
 fn secs(ns: u64) -> f64 {
@@ -259,11 +250,24 @@ impl Data {
             avoiding_s,
             t_end_s,
             depth_commands,
+            colouring: Colouring::of(scenario),
         })
     }
 
     fn colour(&self, track: usize) -> RGBColor {
-        VEHICLE_COLOURS[track % VEHICLE_COLOURS.len()]
+        self.colouring.colour(track)
+    }
+
+    /// A vehicle's name for a legend; none when the group is coloured by file.
+    fn label(&self, track: usize) -> Option<&str> {
+        (!self.colouring.by_file()).then(|| self.tracks[track].name.as_str())
+    }
+
+    /// The files' legend entries when the group is coloured by file.
+    fn file_legend(&self, leg: &mut Legend) {
+        for (label, colour) in self.colouring.files() {
+            leg.push((label.clone(), Key::Line(*colour, 3)));
+        }
     }
 
     /// Pixel size of a figure.

@@ -39,12 +39,17 @@ struct Animation {
     obstacles: Vec<Vec<[f64; 2]>>,
     /// The safe distance, m (the circle drawn around each vehicle).
     safe_distance_m: f64,
+    /// The legend of a group coloured by file: (label, `#rrggbb`), the leader
+    /// first; empty when every vehicle is named beside its dot.
+    files: Vec<(String, String)>,
 }
 
 #[derive(Debug, Serialize)]
 struct AnimVehicle {
     name: String,
     parent: Option<String>,
+    /// `#rrggbb`, as in the figures ([`plots::colours`]).
+    colour: String,
     /// (north, east) per frame, m; null before the vehicle's first sample.
     ne: Vec<Option<[f64; 2]>>,
 }
@@ -58,12 +63,15 @@ fn animation(scenario: &Scenario, rec: &Recording) -> Animation {
     let end_ns = tracks.end_ns();
     let step_ns = (1e9 / FRAME_HZ) as u64;
     let times: Vec<u64> = (0..=end_ns / step_ns).map(|i| i * step_ns).collect();
+    let colouring = plots::colours::Colouring::of(scenario);
     let vehicles = scenario
         .vehicles
         .iter()
-        .map(|v| AnimVehicle {
+        .enumerate()
+        .map(|(k, v)| AnimVehicle {
             name: v.name.clone(),
             parent: v.parent.clone(),
+            colour: plots::colours::hex(colouring.colour(k)),
             ne: times
                 .iter()
                 .map(|&t| {
@@ -91,6 +99,11 @@ fn animation(scenario: &Scenario, rec: &Recording) -> Animation {
         vehicles,
         obstacles,
         safe_distance_m: scenario.safety.safe_distance_m,
+        files: colouring
+            .files()
+            .iter()
+            .map(|(label, c)| (label.clone(), plots::colours::hex(*c)))
+            .collect(),
     }
 }
 
@@ -333,7 +346,21 @@ const PLAYER: &str = r#"
     cx = (lo[0] + hi[0]) / 2; cy = (lo[1] + hi[1]) / 2;
     scale = Math.min(canvas.width / (hi[0] - lo[0] + 2 * pad), canvas.height / (hi[1] - lo[1] + 2 * pad));
   }
-  const colours = ['#000000', '#1f77b4', '#d62728', '#2ca02c', '#ff7f0e', '#9467bd', '#8c564b', '#e377c2', '#17becf', '#bcbd22'];
+  // A large group is coloured by file (D.files: its legend) and its
+  // vehicles go unnamed; a small one names every vehicle beside its dot.
+  const named = D.files.length === 0;
+  function legend() {
+    if (named) return;
+    ctx.font = '12px sans-serif';
+    const w = 12 + Math.max(...D.files.map(f => ctx.measureText(f[0]).width)) + 36, h = 8 + 18 * D.files.length;
+    ctx.fillStyle = 'rgba(255,255,255,0.85)'; ctx.fillRect(8, 8, w, h);
+    ctx.strokeStyle = '#888'; ctx.strokeRect(8, 8, w, h);
+    D.files.forEach((f, k) => {
+      const y = 8 + 13 + 18 * k;
+      ctx.fillStyle = f[1]; ctx.fillRect(16, y - 5, 22, 6);
+      ctx.fillStyle = '#222'; ctx.fillText(f[0], 44, y + 1);
+    });
+  }
   const index = {}; D.vehicles.forEach((v, i) => index[v.name] = i);
   let frame = 0, playing = true, last = null, drawn = 0;
   function draw(i) {
@@ -344,7 +371,7 @@ const PLAYER: &str = r#"
       ctx.beginPath(); o.forEach((p, k) => k ? ctx.lineTo(X(p[0]), Y(p[1])) : ctx.moveTo(X(p[0]), Y(p[1]))); ctx.closePath(); ctx.fill();
     }
     D.vehicles.forEach((v, vi) => {
-      const c = colours[vi % colours.length];
+      const c = v.colour;
       ctx.strokeStyle = c; ctx.globalAlpha = 0.35; ctx.beginPath();
       let started = false;
       for (let k = 0; k <= i; k++) { const p = v.ne[k]; if (!p) continue; if (started) ctx.lineTo(X(p[0]), Y(p[1])); else { ctx.moveTo(X(p[0]), Y(p[1])); started = true; } }
@@ -357,11 +384,12 @@ const PLAYER: &str = r#"
     });
     D.vehicles.forEach((v, vi) => {
       const p = v.ne[i]; if (!p) return;
-      const c = colours[vi % colours.length];
+      const c = v.colour;
       ctx.strokeStyle = c; ctx.globalAlpha = 0.25; ctx.beginPath(); ctx.arc(X(p[0]), Y(p[1]), D.safe_distance_m / 2 * scale, 0, 2 * Math.PI); ctx.stroke(); ctx.globalAlpha = 1;
       ctx.fillStyle = c; ctx.beginPath(); ctx.arc(X(p[0]), Y(p[1]), 4, 0, 2 * Math.PI); ctx.fill();
-      ctx.font = '12px sans-serif'; ctx.fillText(v.name, X(p[0]) + 6, Y(p[1]) - 6);
+      if (named) { ctx.font = '12px sans-serif'; ctx.fillText(v.name, X(p[0]) + 6, Y(p[1]) - 6); }
     });
+    legend();
     label.textContent = 't = ' + D.t[i].toFixed(1) + ' s';
     slider.value = i;
     drawn += 1; body.dataset.frames = drawn;
