@@ -254,6 +254,22 @@ pub fn python() -> Command {
     Command::new(py)
 }
 
+/// Runs one of `tests/python/`'s checkers on `arg` and returns the JSON report
+/// it prints; a failing checker fails the test with its stderr.
+pub fn python_report(script: &str, arg: &Path) -> serde_json::Value {
+    let o = python()
+        .arg(repo_root().join("tests/python").join(script))
+        .arg(arg)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{script} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
 /// The `summary.json` of a finished run.
 pub fn summary(out: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
