@@ -1,8 +1,11 @@
 //! `shoal export --foxglove`, end to end: a short real run of the small
 //! scenario with one obstacle of each kind is exported, and the exported
-//! MCAP is judged by a third-party check (PyPI `mcap` + Foxglove's own
-//! protobuf definitions + `jsonschema`, `tests/python/check_foxglove.py`)
-//! with no shoal code. The output is refused when it exists, unless --force.
+//! MCAP is judged by third-party checks with no shoal code: PyPI `mcap` +
+//! Foxglove's own compiled protobuf definitions
+//! (`tests/python/check_foxglove.py`), and Rerun's MCAP importer
+//! (`tests/python/check_rerun.py`), which must make transforms of `/tf`,
+//! poses of `/<V>/pose` and decode every scene update. The output is refused
+//! when it exists, unless --force.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::collections::BTreeSet;
@@ -110,18 +113,7 @@ fn foxglove_export_passes_the_official_schemas_and_shows_every_part() {
     );
     assert!(!tmp.path().join("view.mcap.partial").exists());
 
-    let py = python()
-        .arg(repo_root().join("tests/python/check_foxglove.py"))
-        .arg("--self-test")
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        py.status.success(),
-        "the exported file fails the official Foxglove schemas: {}",
-        String::from_utf8_lossy(&py.stderr)
-    );
-    let report: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
+    let report = python_report("check_foxglove.py", &[Path::new("--self-test"), &out]);
     let ch = &report["channels"];
     let count = |topic: &str| ch[topic]["count"].as_u64().unwrap_or(0);
     let schema = |topic: &str| ch[topic]["schema"].as_str().unwrap_or("").to_string();
@@ -199,6 +191,30 @@ fn foxglove_export_passes_the_official_schemas_and_shows_every_part() {
     // The checker has teeth: broken copies of each channel's first message are refused.
     let n_channels = ch.as_object().unwrap().len() as u64;
     assert!(report["self_test_refused"].as_u64().unwrap() >= 5 * n_channels);
+
+    // Rerun's importer understands every channel: transforms, poses, and
+    // scene updates decoded field by field.
+    let rr = python_report(
+        "check_rerun.py",
+        &[
+            Path::new("--expect"),
+            Path::new("/tf=Transform3D"),
+            Path::new("--expect"),
+            Path::new("/L/pose=InstancePoses3D"),
+            Path::new("--expect"),
+            Path::new("/F1/parent_estimate=InstancePoses3D"),
+            &out,
+        ],
+    );
+    assert_eq!(rr["channels"].as_u64(), Some(n_channels), "{rr}");
+    for topic in [
+        "/scene/obstacles",
+        "/scene/vehicles",
+        "/scene/slots",
+        "/scene/sonar",
+    ] {
+        assert_eq!(rr["decoded"][topic]["fields"], 2, "{topic}: {rr}");
+    }
 
     // An existing output is refused and left alone; --force replaces it.
     let before = std::fs::read(&out).unwrap();

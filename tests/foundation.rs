@@ -58,7 +58,7 @@ fn paper_run_records_every_channel_and_the_official_readers_decode_it() {
 
     // Official readers, no shoal code: every message decodes, and the values
     // agree with what shoal itself decodes.
-    let report = python_report("read_mcap.py", &out.join("recording.mcap"));
+    let report = python_report("read_mcap.py", &[out.join("recording.mcap")]);
     assert_eq!(
         report["messages"].as_u64().unwrap(),
         rec.messages().len() as u64
@@ -66,7 +66,7 @@ fn paper_run_records_every_channel_and_the_official_readers_decode_it() {
     // A second, independent ROS 2 bag reader (PyPI `rosbags`, its own CDR
     // decoder): `pkg/msg/Type` names, offered QoS on every channel, and the
     // `rosbag2` metadata record agreeing with the file.
-    let bag = python_report("read_rosbag2.py", &out.join("recording.mcap"));
+    let bag = python_report("read_rosbag2.py", &[out.join("recording.mcap")]);
     assert_eq!(
         bag["messages"].as_u64().unwrap(),
         rec.messages().len() as u64,
@@ -81,7 +81,7 @@ fn paper_run_records_every_channel_and_the_official_readers_decode_it() {
     // nested types only by the `MSG: pkg/Type` sections rosbag2 writes, and keeps a
     // channel it cannot resolve as raw bytes. Every channel is decoded into a struct
     // with every field of its schema.
-    let rr = python_report("check_rerun.py", &out.join("recording.mcap"));
+    let rr = python_report("check_rerun.py", &[out.join("recording.mcap")]);
     let with_messages = counts.values().filter(|n| **n > 0).count();
     assert_eq!(rr["channels"].as_u64(), Some(with_messages as u64), "{rr}");
     let truth = rec.samples::<ipc_types::Truth>("/F2/truth");

@@ -254,12 +254,12 @@ pub fn python() -> Command {
     Command::new(py)
 }
 
-/// Runs one of `tests/python/`'s checkers on `arg` and returns the JSON report
-/// it prints; a failing checker fails the test with its stderr.
-pub fn python_report(script: &str, arg: &Path) -> serde_json::Value {
+/// Runs one of `tests/python/`'s checkers with `args` and returns the JSON
+/// report it prints; a failing checker fails the test with its stderr.
+pub fn python_report<S: AsRef<std::ffi::OsStr>>(script: &str, args: &[S]) -> serde_json::Value {
     let o = python()
         .arg(repo_root().join("tests/python").join(script))
-        .arg(arg)
+        .args(args)
         .output()
         .unwrap();
     assert!(

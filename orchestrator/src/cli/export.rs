@@ -8,7 +8,7 @@ use crate::export::{export_to_file, ExportOptions, ExportReport};
 /// Arguments of `shoal export`.
 #[derive(Debug, clap::Args)]
 #[command(after_help = "\
-Channels written (Foxglove JSON, official schemas embedded):
+Channels written (Foxglove's protobuf schemas, embedded; Foxglove and Rerun open the file):
   /tf                    foxglove.FrameTransforms  world (ENU) -> ned -> <V>/body, <V>/level
   /scene/obstacles       foxglove.SceneUpdate      scenario obstacles, in ned
   /scene/vehicles        foxglove.SceneUpdate      hull, heading arrow, name, beacons
@@ -26,7 +26,8 @@ pub struct ExportCmd {
     /// Write a Foxglove-ready MCAP here: obstacles, vehicles, slots, sonar
     /// beams and the camera's line of sight as foxglove.SceneUpdate,
     /// frames as foxglove.FrameTransforms, poses as foxglove.PoseInFrame
-    /// (JSON). Open it in Foxglove and pick the `world` frame (ENU, z up).
+    /// (protobuf). Open it in Foxglove and pick the `world` frame (ENU,
+    /// z up), or in Rerun (`rerun FILE`).
     #[arg(long, value_name = "OUT")]
     pub foxglove: PathBuf,
     /// Replace OUT if it exists (it is refused otherwise).

@@ -102,7 +102,7 @@ impl<W: std::io::Write + std::io::Seek> Converter<W> {
     /// A message's own timestamp for simulated time `ns`: shifted as the
     /// log times are.
     fn time(&self, ns: u64) -> Time {
-        Time::from_ns(ns.saturating_add(self.out.epoch_ns))
+        foxglove::time_from_ns(ns.saturating_add(self.out.epoch_ns))
     }
 
     /// The static scene (obstacles, vehicle models), at time `t0`.
@@ -218,12 +218,9 @@ impl<W: std::io::Write + std::io::Seek> Converter<W> {
             &format!("/{vehicle}/pose"),
             log_time,
             &PoseInFrame {
-                timestamp: ts,
+                timestamp: Some(ts),
                 frame_id: NED_FRAME.to_string(),
-                pose: Pose {
-                    position: foxglove::Vector3::from_array(p),
-                    orientation: to_foxglove(&pose.attitude),
-                },
+                pose: foxglove::pose(p, to_foxglove(&pose.attitude)),
             },
         )?;
         Ok(Done::Used)
@@ -344,12 +341,9 @@ impl<W: std::io::Write + std::io::Seek> Converter<W> {
             &format!("/{vehicle}/parent_estimate"),
             log_time,
             &PoseInFrame {
-                timestamp: self.time(s.header.origin_sim_time_ns),
+                timestamp: Some(self.time(s.header.origin_sim_time_ns)),
                 frame_id: body_frame(vehicle),
-                pose: Pose {
-                    position: foxglove::Vector3::from_array(s.parent_position_body_m),
-                    orientation: to_foxglove(&q),
-                },
+                pose: foxglove::pose(s.parent_position_body_m, to_foxglove(&q)),
             },
         )?;
         Ok(Done::Used)

@@ -14,7 +14,7 @@
 
 use nalgebra::{Quaternion as NQuat, UnitQuaternion, Vector3};
 
-use super::foxglove::{FrameTransform, Quaternion, Time, Vector3 as FVec};
+use super::foxglove::{vector, FrameTransform, Quaternion, Time};
 
 /// The display root: ENU, z up. Pick it as Foxglove's display frame.
 pub const WORLD_FRAME: &str = "world";
@@ -71,11 +71,11 @@ pub fn level_rotation(yaw: f64) -> UnitQuaternion<f64> {
 /// The fixed `world → ned` transform at `t`.
 pub fn world_to_ned_transform(t: Time) -> FrameTransform {
     FrameTransform {
-        timestamp: t,
+        timestamp: Some(t),
         parent_frame_id: WORLD_FRAME.to_string(),
         child_frame_id: NED_FRAME.to_string(),
-        translation: FVec::from_array([0.0; 3]),
-        rotation: to_foxglove(&world_from_ned()),
+        translation: Some(vector([0.0; 3])),
+        rotation: Some(to_foxglove(&world_from_ned())),
     }
 }
 
@@ -88,11 +88,11 @@ pub fn transform(
     q: &UnitQuaternion<f64>,
 ) -> FrameTransform {
     FrameTransform {
-        timestamp: t,
+        timestamp: Some(t),
         parent_frame_id: parent.to_string(),
         child_frame_id: child,
-        translation: FVec::from_array(position),
-        rotation: to_foxglove(q),
+        translation: Some(vector(position)),
+        rotation: Some(to_foxglove(q)),
     }
 }
 
@@ -142,7 +142,9 @@ mod tests {
         // A proper rotation (det +1), so Foxglove can use it as a transform.
         let m = world_from_ned().to_rotation_matrix();
         assert_relative_eq!(m.matrix().determinant(), 1.0, epsilon = 1e-12);
-        let f = world_to_ned_transform(Time::from_ns(0)).rotation;
+        let f = world_to_ned_transform(super::super::foxglove::time_from_ns(0))
+            .rotation
+            .unwrap();
         assert_eq!((f.w, f.z), (0.0, 0.0));
         assert_relative_eq!(f.x, f.y);
     }
@@ -209,7 +211,7 @@ mod tests {
     fn quaternion_order_and_level_frame() {
         // shoal's [w, x, y, z] becomes Foxglove's {x, y, z, w}.
         let q = unit_wxyz([2.0, 0.0, 0.0, 0.0]).unwrap();
-        assert_eq!(to_foxglove(&q), Quaternion::IDENTITY);
+        assert_eq!(to_foxglove(&q), super::super::foxglove::IDENTITY);
         let c = 0.8f64;
         let s = 0.6f64;
         let f = to_foxglove(&unit_wxyz([c, s, 0.0, 0.0]).unwrap());

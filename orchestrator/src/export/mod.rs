@@ -2,9 +2,10 @@
 //! without a plug-in (Foxglove).
 //!
 //! `shoal export REC.mcap --foxglove OUT.mcap` writes an MCAP whose channels
-//! use the well-known Foxglove schemas in JSON (`json` message encoding,
-//! `jsonschema` schema encoding, the official schema text embedded; see
-//! [`foxglove`]), so Foxglove's 3D panel shows the run with no extension:
+//! use the well-known Foxglove schemas in protobuf (`protobuf` message and
+//! schema encoding, each schema the `FileDescriptorSet` Foxglove publishes;
+//! see [`foxglove`]), so Foxglove's 3D panel shows the run with no extension
+//! and Rerun's MCAP importer reads it as transforms and scene entities:
 //!
 //! | topic | schema | what, and how it is derived |
 //! |---|---|---|
@@ -49,7 +50,7 @@ use ipc_types::{Beacons, Channel, LeaderPose, PlannerState, Sonar, Truth};
 use nalgebra::Vector3;
 use shoal_scenario::Scenario;
 
-use foxglove::{FoxgloveMessage, FrameTransforms, Pose, PoseInFrame, SceneUpdate, Time};
+use foxglove::{FoxgloveMessage, FrameTransforms, PoseInFrame, SceneUpdate, Time};
 use frames::{body_frame, level_frame, level_rotation, to_foxglove, transform, NED_FRAME};
 use scene::{ScanView, SlotView, TruePose, VehicleLook};
 
@@ -169,7 +170,7 @@ fn partial_path(out: &Path) -> PathBuf {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ExportReport {
     /// Per channel, in order of creation: topic, schema name, messages.
-    pub channels: Vec<(String, &'static str, u64)>,
+    pub channels: Vec<(String, String, u64)>,
     /// First and last log time, ns.
     pub span_ns: (u64, u64),
     /// Why parts of the view are missing, if any.
@@ -186,10 +187,10 @@ impl ExportReport {
 /// Writes Foxglove messages to one MCAP, a channel per topic, created on first use.
 struct FoxgloveWriter<W: std::io::Write + std::io::Seek> {
     writer: mcap::Writer<W>,
-    schemas: HashMap<&'static str, u16>,
+    schemas: HashMap<String, u16>,
     topics: HashMap<String, usize>,
     /// Channel id, topic, schema name, messages.
-    channels: Vec<(u16, String, &'static str, u64)>,
+    channels: Vec<(u16, String, String, u64)>,
     span_ns: (u64, u64),
     /// Added to every log and publish time (the run's start with
     /// `--epoch`, else 0).
@@ -216,88 +217,44 @@ impl<W: std::io::Write + std::io::Seek> FoxgloveWriter<W> {
         })
     }
 
-    fn write<T: FoxgloveMessage>(
+    /// The index of `topic`'s channel, created with its schema on first use.
+    fn channel(
         &mut self,
         topic: &str,
-        log_time_ns: u64,
-        msg: &T,
-    ) -> anyhow::Result<()> {
-        let idx = match self.topics.get(topic) {
-            Some(i) => *i,
+        schema: &::foxglove::Schema,
+        message_encoding: &str,
+    ) -> anyhow::Result<usize> {
+        if let Some(i) = self.topics.get(topic) {
+            let carried = &self.channels[*i].2;
+            anyhow::ensure!(
+                *carried == schema.name,
+                "topic {topic} carries {carried}, not {}",
+                schema.name
+            );
+            return Ok(*i);
+        }
+        let schema_id = match self.schemas.get(&schema.name) {
+            Some(id) => *id,
             None => {
-                let schema = match self.schemas.get(T::SCHEMA_NAME) {
-                    Some(id) => *id,
-                    None => {
-                        let id = self.writer.add_schema(
-                            T::SCHEMA_NAME,
-                            "jsonschema",
-                            T::SCHEMA_JSON.as_bytes(),
-                        )?;
-                        self.schemas.insert(T::SCHEMA_NAME, id);
-                        id
-                    }
-                };
                 let id = self
                     .writer
-                    .add_channel(schema, topic, "json", &BTreeMap::new())?;
-                self.channels
-                    .push((id, topic.to_string(), T::SCHEMA_NAME, 0));
-                self.topics
-                    .insert(topic.to_string(), self.channels.len() - 1);
-                self.channels.len() - 1
+                    .add_schema(&schema.name, &schema.encoding, &schema.data)?;
+                self.schemas.insert(schema.name.clone(), id);
+                id
             }
         };
-        let (id, _, schema, count) = &mut self.channels[idx];
-        anyhow::ensure!(
-            *schema == T::SCHEMA_NAME,
-            "topic {topic} carries {schema}, not {}",
-            T::SCHEMA_NAME
-        );
-        self.buf.clear();
-        serde_json::to_writer(&mut self.buf, msg)?;
-        let header = mcap::records::MessageHeader {
-            channel_id: *id,
-            sequence: *count as u32,
-            log_time: log_time_ns.saturating_add(self.epoch_ns),
-            publish_time: log_time_ns.saturating_add(self.epoch_ns),
-        };
-        self.writer.write_to_known_channel(&header, &self.buf)?;
-        *count += 1;
-        self.span_ns = (
-            self.span_ns.0.min(log_time_ns),
-            self.span_ns.1.max(log_time_ns),
-        );
-        Ok(())
+        let id = self
+            .writer
+            .add_channel(schema_id, topic, message_encoding, &BTreeMap::new())?;
+        self.channels
+            .push((id, topic.to_string(), schema.name.clone(), 0));
+        self.topics
+            .insert(topic.to_string(), self.channels.len() - 1);
+        Ok(self.channels.len() - 1)
     }
 
-    /// Copies a recorded camera frame (`sensor_msgs/msg/Image`, CDR, as
-    /// stored) onto `topic`: Foxglove's Image panel shows it as it is.
-    fn write_image(&mut self, topic: &str, log_time_ns: u64, data: &[u8]) -> anyhow::Result<()> {
-        const NAME: &str = recordings::image::SCHEMA_NAME;
-        let idx = match self.topics.get(topic) {
-            Some(i) => *i,
-            None => {
-                let schema = match self.schemas.get(NAME) {
-                    Some(id) => *id,
-                    None => {
-                        let id = self.writer.add_schema(
-                            NAME,
-                            "ros2msg",
-                            recordings::image::SCHEMA_TEXT.as_bytes(),
-                        )?;
-                        self.schemas.insert(NAME, id);
-                        id
-                    }
-                };
-                let id = self
-                    .writer
-                    .add_channel(schema, topic, "cdr", &BTreeMap::new())?;
-                self.channels.push((id, topic.to_string(), NAME, 0));
-                self.topics
-                    .insert(topic.to_string(), self.channels.len() - 1);
-                self.channels.len() - 1
-            }
-        };
+    /// Writes `data` on channel `idx` at `log_time_ns` (shifted by the epoch).
+    fn write_bytes(&mut self, idx: usize, log_time_ns: u64, data: &[u8]) -> anyhow::Result<()> {
         let (id, _, _, count) = &mut self.channels[idx];
         let header = mcap::records::MessageHeader {
             channel_id: *id,
@@ -307,7 +264,43 @@ impl<W: std::io::Write + std::io::Seek> FoxgloveWriter<W> {
         };
         self.writer.write_to_known_channel(&header, data)?;
         *count += 1;
+        self.span_ns = (
+            self.span_ns.0.min(log_time_ns),
+            self.span_ns.1.max(log_time_ns),
+        );
         Ok(())
+    }
+
+    /// Writes a Foxglove message (protobuf, its schema the type's own).
+    fn write<T: FoxgloveMessage>(
+        &mut self,
+        topic: &str,
+        log_time_ns: u64,
+        msg: &T,
+    ) -> anyhow::Result<()> {
+        let schema = T::get_schema()
+            .with_context(|| format!("a Foxglove message type without a schema on {topic}"))?;
+        let idx = self.channel(topic, &schema, &T::get_message_encoding())?;
+        let mut buf = std::mem::take(&mut self.buf);
+        buf.clear();
+        let encoded = msg
+            .encode(&mut buf)
+            .map_err(|e| anyhow::anyhow!("cannot encode {} for {topic}: {e}", schema.name));
+        let written = encoded.and_then(|()| self.write_bytes(idx, log_time_ns, &buf));
+        self.buf = buf;
+        written
+    }
+
+    /// Copies a recorded camera frame (`sensor_msgs/msg/Image`, CDR, as
+    /// stored) onto `topic`: Foxglove's Image panel shows it as it is.
+    fn write_image(&mut self, topic: &str, log_time_ns: u64, data: &[u8]) -> anyhow::Result<()> {
+        let schema = ::foxglove::Schema::new(
+            recordings::image::SCHEMA_NAME,
+            "ros2msg",
+            recordings::image::SCHEMA_TEXT.as_bytes(),
+        );
+        let idx = self.channel(topic, &schema, "cdr")?;
+        self.write_bytes(idx, log_time_ns, data)
     }
 
     fn finish(mut self, notes: Vec<String>) -> anyhow::Result<ExportReport> {
@@ -541,12 +534,25 @@ radius_m = 2.0
         let mut out: BTreeMap<String, Vec<(u64, Value)>> = BTreeMap::new();
         for m in mcap::MessageStream::new(&bytes).unwrap() {
             let m = m.unwrap();
-            assert_eq!(m.channel.message_encoding, "json");
+            assert_eq!(m.channel.message_encoding, "protobuf");
             let schema = m.channel.schema.as_ref().unwrap();
-            assert_eq!(schema.encoding, "jsonschema");
+            assert_eq!(schema.encoding, "protobuf");
+            // Decoded with Foxglove's own types, looked at as JSON.
+            fn json<T: ::foxglove::Decode + serde::Serialize>(data: &[u8]) -> Value
+            where
+                T::Error: std::fmt::Debug,
+            {
+                serde_json::to_value(T::decode(data).unwrap()).unwrap()
+            }
+            let value = match schema.name.as_str() {
+                "foxglove.SceneUpdate" => json::<SceneUpdate>(&m.data),
+                "foxglove.FrameTransforms" => json::<FrameTransforms>(&m.data),
+                "foxglove.PoseInFrame" => json::<PoseInFrame>(&m.data),
+                other => panic!("unexpected schema {other}"),
+            };
             out.entry(m.channel.topic.clone())
                 .or_default()
-                .push((m.log_time, serde_json::from_slice(&m.data).unwrap()));
+                .push((m.log_time, value));
         }
         (report, out)
     }

@@ -4,36 +4,36 @@
 use nalgebra::{UnitQuaternion, Vector3};
 
 use super::foxglove::{
-    ArrowPrimitive, Color, CubePrimitive, CylinderPrimitive, LinePrimitive, LineType,
-    Point3 as FPoint, Pose, SceneEntity, SpherePrimitive, TextPrimitive, Time,
-    TriangleListPrimitive, Vector3 as FVec,
+    entity, line, meta, point, pose, pose_at, rgba, sphere, vector, ArrowPrimitive, Color,
+    CubePrimitive, CylinderPrimitive, LineType, SceneEntity, TextPrimitive, Time,
+    TriangleListPrimitive,
 };
 use super::frames::{body_frame, level_frame, level_rotation, to_foxglove, NED_FRAME};
 
 /// Obstacles: sandy, half transparent.
-const OBSTACLE: Color = Color::rgba(0.76, 0.62, 0.42, 0.55);
+const OBSTACLE: Color = rgba(0.76, 0.62, 0.42, 0.55);
 /// The leader's hull.
-const LEADER: Color = Color::rgba(0.95, 0.55, 0.10, 1.0);
+const LEADER: Color = rgba(0.95, 0.55, 0.10, 1.0);
 /// A follower's hull.
-const FOLLOWER: Color = Color::rgba(0.20, 0.50, 0.95, 1.0);
+const FOLLOWER: Color = rgba(0.20, 0.50, 0.95, 1.0);
 /// Beacon lights on a parent's hull.
-const BEACON: Color = Color::rgba(1.0, 0.95, 0.3, 1.0);
+const BEACON: Color = rgba(1.0, 0.95, 0.3, 1.0);
 /// A slot the follower is steering to.
-const SLOT: Color = Color::rgba(0.2, 0.9, 0.4, 0.85);
+const SLOT: Color = rgba(0.2, 0.9, 0.4, 0.85);
 /// A slot shifted for an obstacle (the follower is avoiding).
-const SLOT_AVOIDING: Color = Color::rgba(1.0, 0.6, 0.1, 0.9);
+const SLOT_AVOIDING: Color = rgba(1.0, 0.6, 0.1, 0.9);
 /// The nominal slot (scenario's), ghosted.
-const SLOT_NOMINAL: Color = Color::rgba(0.8, 0.8, 0.8, 0.3);
+const SLOT_NOMINAL: Color = rgba(0.8, 0.8, 0.8, 0.3);
 /// The follower-to-slot error line.
-const SLOT_ERROR: Color = Color::rgba(1.0, 1.0, 1.0, 0.8);
+const SLOT_ERROR: Color = rgba(1.0, 1.0, 1.0, 0.8);
 /// A sonar beam with an echo.
-const ECHO: Color = Color::rgba(1.0, 0.25, 0.2, 1.0);
+const ECHO: Color = rgba(1.0, 0.25, 0.2, 1.0);
 /// A sonar beam with no echo (drawn to the maximum range).
-const NO_ECHO: Color = Color::rgba(0.6, 0.6, 0.6, 0.25);
+const NO_ECHO: Color = rgba(0.6, 0.6, 0.6, 0.25);
 /// A beacon the camera saw in this frame.
-const SEEN: Color = Color::rgba(0.2, 0.95, 0.35, 0.9);
+const SEEN: Color = rgba(0.2, 0.95, 0.35, 0.9);
 /// A beacon the camera did not see (occluded, out of view or too far).
-const UNSEEN: Color = Color::rgba(0.95, 0.2, 0.2, 0.6);
+const UNSEEN: Color = rgba(0.95, 0.2, 0.2, 0.6);
 
 /// A true pose: position NED and attitude body → NED.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,20 +53,20 @@ impl TruePose {
 
 /// One obstacle of the scenario (shoal's sonar type), as an entity in `ned`.
 pub fn obstacle_entity(t: Time, index: usize, obstacle: &sonar::Obstacle) -> SceneEntity {
-    let mut e = SceneEntity::new(t, NED_FRAME, format!("obstacle/{index}"), false);
-    e.meta("kind", obstacle.kind());
+    let mut e = entity(t, NED_FRAME, format!("obstacle/{index}"), false);
+    meta(&mut e, "kind", obstacle.kind());
     match obstacle {
         sonar::Obstacle::Box {
             center_ned_m,
             half_extents_m,
             yaw_deg,
         } => e.cubes.push(CubePrimitive {
-            pose: Pose {
-                position: FVec::from_array(*center_ned_m),
-                orientation: to_foxglove(&level_rotation(yaw_deg.to_radians())),
-            },
-            size: FVec::from_array(half_extents_m.map(|h| 2.0 * h)),
-            color: OBSTACLE,
+            pose: pose(
+                *center_ned_m,
+                to_foxglove(&level_rotation(yaw_deg.to_radians())),
+            ),
+            size: Some(vector(half_extents_m.map(|h| 2.0 * h))),
+            color: Some(OBSTACLE),
         }),
         sonar::Obstacle::Cylinder {
             center_ned_m,
@@ -74,30 +74,29 @@ pub fn obstacle_entity(t: Time, index: usize, obstacle: &sonar::Obstacle) -> Sce
             half_height_m,
         } => e.cylinders.push(CylinderPrimitive {
             // Foxglove's cylinder axis is its z: NED z, vertical, as shoal's.
-            pose: Pose::at(*center_ned_m),
-            size: FVec::from_array([2.0 * radius_m, 2.0 * radius_m, 2.0 * half_height_m]),
+            pose: pose_at(*center_ned_m),
+            size: Some(vector([
+                2.0 * radius_m,
+                2.0 * radius_m,
+                2.0 * half_height_m,
+            ])),
             bottom_scale: 1.0,
             top_scale: 1.0,
-            color: OBSTACLE,
+            color: Some(OBSTACLE),
         }),
         sonar::Obstacle::Sphere {
             center_ned_m,
             radius_m,
-        } => e.spheres.push(SpherePrimitive {
-            pose: Pose::at(*center_ned_m),
-            size: FVec::from_array([2.0 * radius_m; 3]),
-            color: OBSTACLE,
-        }),
+        } => e
+            .spheres
+            .push(sphere(*center_ned_m, [2.0 * radius_m; 3], OBSTACLE)),
         sonar::Obstacle::Mesh {
             vertices_ned_m,
             triangles,
         } => e.triangles.push(TriangleListPrimitive {
-            pose: Pose::identity(),
-            points: vertices_ned_m
-                .iter()
-                .map(|v| FVec::from_array(*v))
-                .collect(),
-            color: OBSTACLE,
+            pose: pose_at([0.0; 3]),
+            points: vertices_ned_m.iter().map(|v| point(*v)).collect(),
+            color: Some(OBSTACLE),
             colors: Vec::new(),
             indices: triangles.iter().flatten().copied().collect(),
         }),
@@ -124,48 +123,41 @@ pub struct VehicleLook {
 /// the hull as a cylinder along body x, an arrow out of the nose, its name,
 /// and its beacons.
 pub fn vehicle_entity(t: Time, v: &VehicleLook) -> SceneEntity {
-    let mut e = SceneEntity::new(t, &body_frame(&v.name), format!("vehicle/{}", v.name), true);
-    e.meta("role", if v.leader { "leader" } else { "follower" });
+    let mut e = entity(t, &body_frame(&v.name), format!("vehicle/{}", v.name), true);
+    meta(&mut e, "role", if v.leader { "leader" } else { "follower" });
     let color = if v.leader { LEADER } else { FOLLOWER };
     // The cylinder's axis is its z: a quarter turn about y brings z onto x.
     let along_x = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_2);
     e.cylinders.push(CylinderPrimitive {
-        pose: Pose {
-            position: FVec::from_array([0.0; 3]),
-            orientation: to_foxglove(&along_x),
-        },
-        size: FVec::from_array([
+        pose: pose([0.0; 3], to_foxglove(&along_x)),
+        size: Some(vector([
             2.0 * v.hull_radius_m,
             2.0 * v.hull_radius_m,
             v.hull_length_m,
-        ]),
+        ])),
         bottom_scale: 1.0,
         top_scale: 0.6,
-        color,
+        color: Some(color),
     });
     e.arrows.push(ArrowPrimitive {
-        pose: Pose::at([v.hull_length_m / 2.0, 0.0, 0.0]),
+        pose: pose_at([v.hull_length_m / 2.0, 0.0, 0.0]),
         shaft_length: 0.8,
         shaft_diameter: 0.08,
         head_length: 0.35,
         head_diameter: 0.25,
-        color,
+        color: Some(color),
     });
     e.texts.push(TextPrimitive {
         // Above the hull: body z is down.
-        pose: Pose::at([0.0, 0.0, -(v.hull_radius_m + 0.6)]),
+        pose: pose_at([0.0, 0.0, -(v.hull_radius_m + 0.6)]),
         billboard: true,
         font_size: 14.0,
         scale_invariant: true,
-        color: Color::rgba(1.0, 1.0, 1.0, 1.0),
+        color: Some(rgba(1.0, 1.0, 1.0, 1.0)),
         text: v.name.clone(),
     });
     for b in &v.beacons_body_m {
-        e.spheres.push(SpherePrimitive {
-            pose: Pose::at(*b),
-            size: FVec::from_array([0.15; 3]),
-            color: BEACON,
-        });
+        e.spheres.push(sphere(*b, [0.15; 3], BEACON));
     }
     e
 }
@@ -196,39 +188,28 @@ pub fn slot_entity(
     follower_pose: &TruePose,
     parent_pose: &TruePose,
 ) -> SceneEntity {
-    let mut e = SceneEntity::new(t, &level_frame(parent), format!("slot/{follower}"), true);
+    let mut e = entity(t, &level_frame(parent), format!("slot/{follower}"), true);
     let yaw = super::frames::yaw_of(&parent_pose.attitude);
     let here = level_rotation(yaw).inverse() * (follower_pose.position - parent_pose.position);
     let err = (here - Vector3::from(slot.filtered_m)).norm();
-    e.meta("follower", follower);
-    e.meta("parent", parent);
-    e.meta("mode", slot.mode);
-    e.meta("avoiding", slot.avoiding);
-    e.meta("parent_estimate_valid", slot.parent_valid);
-    e.meta("slot_error_m", format!("{err:.3}"));
-    e.spheres.push(SpherePrimitive {
-        pose: Pose::at(slot.filtered_m),
-        size: FVec::from_array([0.5; 3]),
-        color: if slot.avoiding { SLOT_AVOIDING } else { SLOT },
-    });
-    e.spheres.push(SpherePrimitive {
-        pose: Pose::at(slot.nominal_m),
-        size: FVec::from_array([0.5; 3]),
-        color: SLOT_NOMINAL,
-    });
-    e.lines.push(LinePrimitive {
-        kind: LineType::Strip,
-        pose: Pose::identity(),
-        thickness: 0.04,
-        scale_invariant: false,
-        points: vec![
-            FVec::from_array(slot.filtered_m),
-            FVec::from_array([here.x, here.y, here.z]),
-        ],
-        color: SLOT_ERROR,
-        colors: Vec::new(),
-        indices: Vec::new(),
-    });
+    meta(&mut e, "follower", follower);
+    meta(&mut e, "parent", parent);
+    meta(&mut e, "mode", slot.mode);
+    meta(&mut e, "avoiding", slot.avoiding);
+    meta(&mut e, "parent_estimate_valid", slot.parent_valid);
+    meta(&mut e, "slot_error_m", format!("{err:.3}"));
+    let slot_colour = if slot.avoiding { SLOT_AVOIDING } else { SLOT };
+    e.spheres
+        .push(sphere(slot.filtered_m, [0.5; 3], slot_colour));
+    e.spheres
+        .push(sphere(slot.nominal_m, [0.5; 3], SLOT_NOMINAL));
+    e.lines.push(line(
+        LineType::LineStrip,
+        0.04,
+        vec![point(slot.filtered_m), point([here.x, here.y, here.z])],
+        SLOT_ERROR,
+        Vec::new(),
+    ));
     e
 }
 
@@ -256,7 +237,7 @@ pub fn beam_direction(azimuth_rad: f64, elevation_rad: f64) -> Vector3<f64> {
 /// was at `t` (not frame-locked): echoes red to the return, with a dot at it;
 /// beams with no echo faint grey to the maximum range.
 pub fn sonar_entity(t: Time, vehicle: &str, scan: &ScanView) -> SceneEntity {
-    let mut e = SceneEntity::new(t, &body_frame(vehicle), format!("sonar/{vehicle}"), false);
+    let mut e = entity(t, &body_frame(vehicle), format!("sonar/{vehicle}"), false);
     let mount = Vector3::from(scan.mount_body_m);
     let mut points = Vec::with_capacity(2 * scan.beams.len());
     let mut colors = Vec::with_capacity(2 * scan.beams.len());
@@ -268,19 +249,17 @@ pub fn sonar_entity(t: Time, vehicle: &str, scan: &ScanView) -> SceneEntity {
             None => (scan.range_max_m, NO_ECHO),
         };
         let end = mount + dir * len;
-        points.push(FVec::from_array([mount.x, mount.y, mount.z]));
-        points.push(FVec::from_array([end.x, end.y, end.z]));
+        points.push(point([mount.x, mount.y, mount.z]));
+        points.push(point([end.x, end.y, end.z]));
         colors.extend([color, color]);
         if let Some(r) = range {
             echoes.push(format!("{i}:{r:.2}"));
-            e.spheres.push(SpherePrimitive {
-                pose: Pose::at([end.x, end.y, end.z]),
-                size: FVec::from_array([0.3; 3]),
-                color: ECHO,
-            });
+            e.spheres
+                .push(sphere([end.x, end.y, end.z], [0.3; 3], ECHO));
         }
     }
-    e.meta(
+    meta(
+        &mut e,
         "echoes_m",
         if echoes.is_empty() {
             "none".to_string()
@@ -288,16 +267,8 @@ pub fn sonar_entity(t: Time, vehicle: &str, scan: &ScanView) -> SceneEntity {
             echoes.join(" ")
         },
     );
-    e.lines.push(LinePrimitive {
-        kind: LineType::List,
-        pose: Pose::identity(),
-        thickness: 0.05,
-        scale_invariant: false,
-        points,
-        color: ECHO,
-        colors,
-        indices: Vec::new(),
-    });
+    e.lines
+        .push(line(LineType::LineList, 0.05, points, ECHO, colors));
     e
 }
 
@@ -311,30 +282,22 @@ pub fn line_of_sight_entity(
     camera_ned: &Vector3<f64>,
     beacons: &[(Vector3<f64>, bool)],
 ) -> SceneEntity {
-    let mut e = SceneEntity::new(t, NED_FRAME, format!("los/{follower}"), false);
+    let mut e = entity(t, NED_FRAME, format!("los/{follower}"), false);
     let seen = beacons.iter().filter(|(_, v)| *v).count();
-    e.meta("follower", follower);
-    e.meta("parent", parent);
-    e.meta("visible", format!("{seen}/{}", beacons.len()));
-    let cam: FPoint = FVec::from_array([camera_ned.x, camera_ned.y, camera_ned.z]);
+    meta(&mut e, "follower", follower);
+    meta(&mut e, "parent", parent);
+    meta(&mut e, "visible", format!("{seen}/{}", beacons.len()));
+    let cam = point([camera_ned.x, camera_ned.y, camera_ned.z]);
     let mut points = Vec::with_capacity(2 * beacons.len());
     let mut colors = Vec::with_capacity(2 * beacons.len());
     for (b, visible) in beacons {
         let c = if *visible { SEEN } else { UNSEEN };
         points.push(cam);
-        points.push(FVec::from_array([b.x, b.y, b.z]));
+        points.push(point([b.x, b.y, b.z]));
         colors.extend([c, c]);
     }
-    e.lines.push(LinePrimitive {
-        kind: LineType::List,
-        pose: Pose::identity(),
-        thickness: 0.03,
-        scale_invariant: false,
-        points,
-        color: SEEN,
-        colors,
-        indices: Vec::new(),
-    });
+    e.lines
+        .push(line(LineType::LineList, 0.03, points, SEEN, colors));
     e
 }
 
@@ -373,7 +336,7 @@ mod tests {
             mount_body_m: [0.8, 0.0, 0.0],
             range_max_m: 20.0,
         };
-        let e = sonar_entity(Time::from_ns(0), "L", &scan);
+        let e = sonar_entity(super::super::foxglove::time_from_ns(0), "L", &scan);
         assert_eq!(e.frame_id, "L/body");
         let p = &e.lines[0].points;
         assert_eq!(p.len(), 4);
@@ -398,7 +361,14 @@ mod tests {
             parent_valid: true,
             mode: 1,
         };
-        let e = slot_entity(Time::from_ns(0), "F1", "L", &slot, &follower, &parent);
+        let e = slot_entity(
+            super::super::foxglove::time_from_ns(0),
+            "F1",
+            "L",
+            &slot,
+            &follower,
+            &parent,
+        );
         assert_eq!(e.frame_id, "L/level");
         let end = e.lines[0].points[1];
         assert_relative_eq!(end.x, -8.0, epsilon = 1e-9);
@@ -415,12 +385,19 @@ mod tests {
             half_extents_m: [10.0, 5.0, 15.0],
             yaw_deg: 90.0,
         };
-        let e = obstacle_entity(Time::from_ns(0), 0, &o);
+        let e = obstacle_entity(super::super::foxglove::time_from_ns(0), 0, &o);
         let c = &e.cubes[0];
-        assert_eq!((c.size.x, c.size.y, c.size.z), (20.0, 10.0, 30.0));
+        let size = c.size.unwrap();
+        assert_eq!((size.x, size.y, size.z), (20.0, 10.0, 30.0));
         // A quarter turn about z: w = z = √½.
-        assert_relative_eq!(c.pose.orientation.w, std::f64::consts::FRAC_1_SQRT_2);
-        assert_relative_eq!(c.pose.orientation.z, std::f64::consts::FRAC_1_SQRT_2);
+        assert_relative_eq!(
+            c.pose.unwrap().orientation.unwrap().w,
+            std::f64::consts::FRAC_1_SQRT_2
+        );
+        assert_relative_eq!(
+            c.pose.unwrap().orientation.unwrap().z,
+            std::f64::consts::FRAC_1_SQRT_2
+        );
     }
 
     #[test]
@@ -430,7 +407,7 @@ mod tests {
             (Vector3::new(5.0, 0.0, 0.0), true),
             (Vector3::new(5.0, 1.0, 0.0), false),
         ];
-        let e = line_of_sight_entity(Time::from_ns(0), "F1", "L", &cam, &b);
+        let e = line_of_sight_entity(super::super::foxglove::time_from_ns(0), "F1", "L", &cam, &b);
         assert_eq!(e.lines[0].points.len(), 4);
         assert_eq!(e.lines[0].colors[0], SEEN);
         assert_eq!(e.lines[0].colors[2], UNSEEN);
