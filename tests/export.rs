@@ -232,3 +232,147 @@ fn foxglove_export_passes_the_official_schemas_and_shows_every_part() {
     // The same recording exports to the same bytes.
     assert_eq!(std::fs::read(&out).unwrap(), before);
 }
+
+/// The port the recorder's live view took (`--live 127.0.0.1:0`), from its log.
+fn live_port(run_dir: &Path, child: &mut std::process::Child) -> u16 {
+    let log = run_dir.join("logs/run.recorder.log");
+    let start = std::time::Instant::now();
+    loop {
+        let text = std::fs::read_to_string(&log).unwrap_or_default();
+        if let Some(rest) = text.split("live view on ws://127.0.0.1:").nth(1) {
+            let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
+            return digits.parse().unwrap();
+        }
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("the run ended ({status}) before its live view came up: {text}");
+        }
+        assert!(start.elapsed().as_secs() < 60, "no live view: {text}");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+#[test]
+fn a_live_run_serves_what_it_records_to_a_foxglove_protocol_client_and_a_stalled_client_does_not_stall_it(
+) {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = write_scenario(tmp.path(), "live.toml", &small_scenario("live", 12.0));
+    let run_dir = tmp.path().join("run");
+    let mut child = shoal()
+        .args(["run", "--quiet", "--live", "127.0.0.1:0", "--pace", "3"])
+        .arg(&scenario)
+        .arg("--out")
+        .arg(&run_dir)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let url = format!("ws://127.0.0.1:{}", live_port(&run_dir, &mut child));
+    let client = repo_root().join("tests/python/live_client.py");
+    // A client that subscribes to everything and then reads nothing for
+    // longer than the run lasts.
+    let stalled = python()
+        .arg(&client)
+        .args([url.as_str(), "--stall", "6"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let topics = [
+        "/L/truth",
+        "/F1/planner_state",
+        "/F1/leader_pose",
+        "/F2/sonar",
+    ];
+    let mut args = vec![url.as_str()];
+    for t in &topics {
+        args.extend(["--subscribe", t]);
+    }
+    args.extend(["--count", "20"]);
+    let live = python_report("live_client.py", &args);
+
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "the live run failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stalled = stalled.wait_with_output().unwrap();
+    assert!(
+        stalled.status.success(),
+        "the stalled client failed: {}",
+        String::from_utf8_lossy(&stalled.stderr)
+    );
+    assert_eq!(summary(&run_dir)["verdict"]["pass"], true);
+
+    // Every channel of the recording was advertised, with its schema.
+    let rec = Recording::open(&run_dir.join("recording.mcap")).unwrap();
+    let recorded: BTreeSet<(String, String)> = rec
+        .channels()
+        .iter()
+        .map(|c| (c.topic.clone(), c.schema_name.clone()))
+        .collect();
+    let advertised: BTreeSet<(String, String)> = live["advertised"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(t, s)| (t.clone(), s.as_str().unwrap().to_string()))
+        .collect();
+    assert_eq!(advertised, recorded);
+    assert!(live["server"].as_str().unwrap().starts_with("shoal run"));
+
+    // What came live is what was recorded: the same bytes at the same time,
+    // decoded by mcap-ros2-support from the advertised schema, in order.
+    for topic in topics {
+        let got = &live["subscribed"][topic];
+        assert!(got["count"].as_u64().unwrap() >= 20, "{topic}: {got}");
+        let log_times: Vec<u64> = got["log_times"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        let sim_times: Vec<u64> = got["sim_times"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        assert_eq!(
+            log_times, sim_times,
+            "{topic}: log time is the sample's sim time"
+        );
+        let seqs: Vec<u64> = got["seqs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        assert!(
+            seqs.windows(2).all(|w| w[1] == w[0] + 1),
+            "{topic}: a client that keeps up misses nothing: {seqs:?}"
+        );
+        let recorded: std::collections::BTreeMap<u64, String> = rec
+            .topic_messages(topic)
+            .map(|m| (m.log_time, hex(&m.data)))
+            .collect();
+        for (t, payload) in log_times.iter().zip(got["payload_hex"].as_array().unwrap()) {
+            assert_eq!(
+                recorded.get(t).map(String::as_str),
+                payload.as_str(),
+                "{topic} at {t} ns: the live message is not the recorded one"
+            );
+        }
+    }
+    // The recorder counted what it sent live.
+    let sent: u64 = rec
+        .metadata()
+        .get("shoal.recorder")
+        .and_then(|m| m.get("live_sent"))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0);
+    assert!(sent >= 80, "live_sent {sent}");
+}

@@ -32,7 +32,9 @@ pub use diff::first_field_difference;
 pub use reader::{ChannelStats, InspectReport, Recording, RecordingError, StoredMessage};
 pub use recover::{join_hosts, merge, recover, RecoverError, RecoverReport};
 pub use registry::{all_types, type_info_by_schema, TypeInfo};
-pub use writer::{Compression, RecordingWriter, WriterError, WriterOptions, CDR_HEADER};
+pub use writer::{
+    ChannelSchema, Compression, RecordingWriter, WriterError, WriterOptions, CDR_HEADER,
+};
 
 /// Decodes a stored message body (CDR header + raw bytes) into a sample.
 pub fn decode<T: ipc_types::Sample>(data: &[u8]) -> Option<T> {

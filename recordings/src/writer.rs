@@ -127,6 +127,21 @@ pub struct RecordingWriter {
     qos: String,
     buf: Vec<u8>,
     messages: u64,
+    /// Per channel id: its topic and schema, for a live view of the same
+    /// channels ([`RecordingWriter::channel_schema`]).
+    channel_schemas: BTreeMap<u16, ChannelSchema>,
+}
+
+/// A channel as the recording declares it: topic and `ros2msg` schema, the
+/// messages `cdr`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChannelSchema {
+    /// Topic, e.g. `/F1/planner_state`.
+    pub topic: String,
+    /// Schema name, e.g. `shoal_msgs/msg/PlannerState`.
+    pub schema_name: String,
+    /// The `ros2msg` schema text, dependencies included.
+    pub schema_text: String,
 }
 
 impl RecordingWriter {
@@ -161,6 +176,7 @@ impl RecordingWriter {
             qos: rosbag2::offered_qos_profiles(opts.qos_depth),
             buf: Vec::with_capacity(32 * 1024),
             messages: 0,
+            channel_schemas: BTreeMap::new(),
         })
     }
 
@@ -184,10 +200,10 @@ impl RecordingWriter {
 
     fn add_channel_qos<T: Sample>(&mut self, topic: &str, qos: String) -> Result<u16, WriterError> {
         let info = type_info::<T>();
+        let text = (info.schema)()?;
         let schema_id = match self.schemas.get(info.schema_name) {
             Some(id) => *id,
             None => {
-                let text = (info.schema)()?;
                 let id = self
                     .writer
                     .add_schema(info.schema_name, "ros2msg", text.as_bytes())?;
@@ -195,7 +211,12 @@ impl RecordingWriter {
                 id
             }
         };
-        self.add_channel_with_schema(topic, schema_id, info.schema_name, info.type_name, qos)
+        self.add_channel_with_schema(
+            topic,
+            (schema_id, info.schema_name, &text),
+            info.type_name,
+            qos,
+        )
     }
 
     /// Adds a follower's camera frames as `sensor_msgs/msg/Image` (see
@@ -216,14 +237,19 @@ impl RecordingWriter {
             }
         };
         let qos = rosbag2::offered_qos_profiles(depth);
-        self.add_channel_with_schema(topic, schema_id, name, ipc_types::Image::TYPE_NAME, qos)
+        self.add_channel_with_schema(
+            topic,
+            (schema_id, name, crate::image::SCHEMA_TEXT),
+            ipc_types::Image::TYPE_NAME,
+            qos,
+        )
     }
 
+    /// Adds a channel whose schema is `(id, name, text)`.
     fn add_channel_with_schema(
         &mut self,
         topic: &str,
-        schema_id: u16,
-        schema_name: &str,
+        (schema_id, schema_name, schema_text): (u16, &str, &str),
         type_name: &str,
         qos: String,
     ) -> Result<u16, WriterError> {
@@ -240,7 +266,26 @@ impl RecordingWriter {
                 messages: 0,
             },
         );
+        self.channel_schemas.insert(
+            id,
+            ChannelSchema {
+                topic: topic.to_string(),
+                schema_name: schema_name.to_string(),
+                schema_text: schema_text.to_string(),
+            },
+        );
         Ok(id)
+    }
+
+    /// The topic and schema of channel `id`, as the recording declares them.
+    pub fn channel_schema(&self, id: u16) -> Option<&ChannelSchema> {
+        self.channel_schemas.get(&id)
+    }
+
+    /// The message body (CDR) the last write put in the file: what a live
+    /// view sends, with no second encoding.
+    pub fn last_message(&self) -> &[u8] {
+        &self.buf
     }
 
     /// Writes one sample; log and publish time are its simulation time.

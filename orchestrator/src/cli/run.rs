@@ -54,6 +54,26 @@ pub struct RunCmd {
     /// (hosts.json gives it).
     #[arg(long, value_name = "FILE|netns:K")]
     hosts: Option<PathBuf>,
+    /// Watch the run while it runs: the recorder serves every channel it
+    /// records, as it records it (same topics, schemas and CDR bodies), over
+    /// the Foxglove WebSocket protocol on this address (default
+    /// 127.0.0.1:8765; loopback unless told otherwise; port 0 picks a free
+    /// one, named in logs/run.recorder.log). In Foxglove: Open connection →
+    /// Foxglove WebSocket → ws://127.0.0.1:8765. A lockstep run is paced to
+    /// real time unless --pace says otherwise. One host only.
+    #[arg(
+        long,
+        value_name = "HOST:PORT",
+        num_args = 0..=1,
+        default_missing_value = "127.0.0.1:8765"
+    )]
+    live: Option<String>,
+    /// Pace a lockstep run at FACTOR simulated seconds per wall-clock second
+    /// (1 = real time, the default with --live; 0 = as fast as the machine
+    /// allows, the default otherwise). Realtime and dataflow runs keep the
+    /// wall clock's pace.
+    #[arg(long, value_name = "FACTOR")]
+    pace: Option<f64>,
 }
 
 /// Where the service binaries are and how long a tick may take: the options
@@ -99,6 +119,27 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
         .unwrap_or_else(|| launch::default_out(&scenario));
     let mut settings = cmd.processes.settings(cmd.mode, cmd.quiet)?;
     settings.spin_us = cmd.spin_us;
+    settings.pace = pace_of(&cmd)?;
+    if let Some(addr) = &cmd.live {
+        if cmd.hosts.is_some() {
+            anyhow::bail!(
+                "--live serves one host's recorder: run without --hosts to watch it live"
+            );
+        }
+        addr.parse::<std::net::SocketAddr>().map_err(|e| {
+            anyhow::anyhow!("--live {addr}: not an address such as 127.0.0.1:8765 ({e})")
+        })?;
+        settings.live = Some(addr.clone());
+        if !cmd.quiet {
+            eprintln!(
+                "live view on ws://{addr} (Foxglove: Open connection, Foxglove WebSocket){}",
+                match settings.pace {
+                    Some(p) => format!(", paced at {p}x real time"),
+                    None => String::new(),
+                }
+            );
+        }
+    }
     let local = cmd
         .hosts
         .as_ref()
@@ -142,6 +183,28 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
     }
     println!("{}", out.display());
     Ok(())
+}
+
+/// The pace of a lockstep run: `--pace`, else real time with `--live`;
+/// `None` (as fast as the machine allows) for 0 or a wall-clock mode.
+fn pace_of(cmd: &RunCmd) -> anyhow::Result<Option<f64>> {
+    if let Some(p) = cmd.pace {
+        anyhow::ensure!(
+            p.is_finite() && p >= 0.0,
+            "--pace {p}: a factor >= 0 (1 = real time, 0 = as fast as the machine allows)"
+        );
+        anyhow::ensure!(
+            cmd.mode == Mode::Lockstep || p == 0.0,
+            "--pace applies to lockstep runs: a {} run keeps the wall clock's pace",
+            cmd.mode.as_str()
+        );
+    }
+    let pace = match (cmd.pace, &cmd.live) {
+        (Some(p), _) => p,
+        (None, Some(_)) if cmd.mode == Mode::Lockstep => 1.0,
+        _ => 0.0,
+    };
+    Ok((pace > 0.0).then_some(pace))
 }
 
 /// The closing table of a run (also `shoal summarize`'s), on stderr.

@@ -403,6 +403,7 @@ fn prepare(
         epoch_mono_ns: order.epoch_mono_ns,
         spin_us: order.spin_us,
         no_work: false,
+        live: None,
         scenario_path,
         scenario: scenario.clone(),
         scope: Some(HostScope {

@@ -48,6 +48,12 @@ pub struct RunOptions {
     /// Start every vehicle process with `--no-work` (the runtime's floor:
     /// `shoal bench scale --floor`); the world and the recorder work.
     pub no_work: bool,
+    /// Serve a live view on this address: the recorder's Foxglove
+    /// WebSocket server (`shoal run --live`).
+    pub live: Option<String>,
+    /// Pace lockstep ticks at this many simulated seconds per wall-clock
+    /// second (`--pace`); `None`: as fast as the machine allows.
+    pub pace: Option<f64>,
 }
 
 /// What a run produced.
@@ -347,6 +353,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         epoch_mono_ns: epoch,
         spin_us: opts.spin_us,
         no_work: opts.no_work,
+        live: opts.live.clone(),
         scenario_path: scenario_path.clone(),
         scenario: scenario.clone(),
         scope: None,
@@ -559,6 +566,13 @@ fn lockstep(
         }
         // A detached process's last step must be over before its next.
         ports.settle_detached(sup, procs, due.iter().copied(), opts)?;
+        if let Some(pace) = opts.pace {
+            // Paced (a live view): no tick before its simulated time, scaled.
+            let due_at = start + Duration::from_secs_f64(sim_s / pace);
+            if let Some(wait) = due_at.checked_duration_since(Instant::now()) {
+                std::thread::sleep(wait);
+            }
+        }
         ports.start_tick(tick, ticks, tick_ns, &due, procs)?;
         awaited.clear();
         awaited.extend(due.iter().copied().filter(|&i| !ports.detached[i]));

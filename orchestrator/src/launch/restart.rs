@@ -40,6 +40,8 @@ pub(crate) struct Launch {
     pub(crate) spin_us: u64,
     /// Vehicle processes are started with `--no-work`.
     pub(crate) no_work: bool,
+    /// The recorder serves a live view on this address (`--live`).
+    pub(crate) live: Option<String>,
     pub(crate) scenario_path: PathBuf,
     pub(crate) scenario: Scenario,
     /// The share of a run spread over hosts that this host runs; `None`:
@@ -157,6 +159,10 @@ impl Launch {
             args.push(self.recording(restart).display().to_string());
             args.push("--effective".into());
             args.push(self.effective_scenario().display().to_string());
+            if let Some(addr) = &self.live {
+                args.push("--live".into());
+                args.push(addr.clone());
+            }
             if let Some(scope) = &self.scope {
                 args.push("--host".into());
                 args.push(scope.host.clone());

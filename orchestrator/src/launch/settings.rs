@@ -29,6 +29,11 @@ pub struct RunSettings {
     pub idle_poll: bool,
     /// Vehicle processes take part without working (`--no-work`).
     pub no_work: bool,
+    /// Serve a live view on this address (`shoal run --live`).
+    pub live: Option<String>,
+    /// Pace a lockstep run at this many simulated seconds per wall-clock
+    /// second (`--pace`); `None`: as fast as the machine allows.
+    pub pace: Option<f64>,
 }
 
 /// Where the service binaries are: `bin_dir`, else the directory of the
@@ -63,6 +68,8 @@ impl RunSettings {
             hosts: None,
             idle_poll: false,
             no_work: false,
+            live: None,
+            pace: None,
         })
     }
 
@@ -79,6 +86,8 @@ impl RunSettings {
             hosts: self.hosts.clone(),
             idle_poll: self.idle_poll,
             no_work: self.no_work,
+            live: self.live.clone(),
+            pace: self.pace,
         }
     }
 }

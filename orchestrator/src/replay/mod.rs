@@ -412,6 +412,7 @@ pub fn rerun(rec: &Recording, opts: &RerunOptions) -> anyhow::Result<RerunReport
         epoch_mono_ns: 0,
         spin_us: 0,
         no_work: false,
+        live: None,
         scenario_path: scenario_path.clone(),
         scenario: scenario.clone(),
         scope: None,

@@ -4,6 +4,7 @@
 //! same scenario and seed give the same messages.
 use clap::Parser;
 
+mod live;
 mod node;
 
 /// Command line of the recorder.
@@ -24,6 +25,10 @@ struct Cli {
     effective: Option<std::path::PathBuf>,
     #[command(flatten)]
     scope: node::Scope,
+    /// Serve what is recorded, as it is recorded, over the Foxglove
+    /// WebSocket protocol on this address (`shoal run --live`).
+    #[arg(long, value_name = "HOST:PORT")]
+    live: Option<String>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -41,7 +46,14 @@ fn main() -> anyhow::Result<()> {
         as_run: &text,
         effective: effective.as_deref(),
     };
-    let task = node::RecorderTask::new(&rt, &scenario, &texts, &cli.scope, &cli.out)?;
+    let task = node::RecorderTask::new(
+        &rt,
+        &scenario,
+        &texts,
+        &cli.scope,
+        &cli.out,
+        cli.live.as_deref(),
+    )?;
     rt.run(task)?;
     Ok(())
 }

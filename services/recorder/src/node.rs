@@ -126,6 +126,8 @@ pub const FLUSH_PERIOD_SIM_NS: u64 = 1_000_000_000;
 
 pub struct RecorderTask {
     writer: Option<RecordingWriter>,
+    /// The live view (`--live`), serving what is recorded as it is.
+    live: Option<crate::live::Live>,
     taps: Vec<Box<dyn Tap>>,
     arena: Vec<u8>,
     batch: Vec<Pending>,
@@ -197,6 +199,7 @@ impl RecorderTask {
         texts: &ScenarioTexts<'_>,
         scope: &Scope,
         out: &Path,
+        live: Option<&str>,
     ) -> anyhow::Result<Self> {
         let opts = WriterOptions {
             compression: match scenario.recording.compression {
@@ -309,8 +312,21 @@ impl RecorderTask {
                 }));
             }
         }
+        let live = match live {
+            Some(addr) => {
+                let mut l = crate::live::Live::start(addr, &run)?;
+                for tap in &taps {
+                    if let Some(schema) = writer.channel_schema(tap.channel()) {
+                        l.add(tap.channel(), schema)?;
+                    }
+                }
+                Some(l)
+            }
+            None => None,
+        };
         Ok(Self {
             writer: Some(writer),
+            live,
             taps,
             arena: Vec::with_capacity(1 << 20),
             batch: Vec::with_capacity(4096),
@@ -339,6 +355,9 @@ impl RecorderTask {
                     &self.arena[p.start..p.start + p.len],
                 )
                 .map_err(TaskError::failed("recording write"))?;
+            if let Some(live) = self.live.as_mut() {
+                live.log(channel, p.sim_time_ns, writer.last_message());
+            }
         }
         // Close a chunk each simulated second, so a recorder that dies loses
         // about a second of the run at any speed (a wall-clock period would
@@ -363,6 +382,10 @@ impl Task for RecorderTask {
 
     fn finish(&mut self) -> Result<(), TaskError> {
         self.drain(None)?;
+        let live_sent = self.live.take().map(|mut live| {
+            live.stop();
+            live.sent()
+        });
         let lost: u64 = self.taps.iter().map(|t| t.lost()).sum();
         let rejected: u64 = self.taps.iter().map(|t| t.rejected()).sum();
         if let Some(mut writer) = self.writer.take() {
@@ -370,6 +393,10 @@ impl Task for RecorderTask {
             meta.insert("messages".to_string(), writer.messages().to_string());
             meta.insert("dropped".to_string(), lost.to_string());
             meta.insert("rejected".to_string(), rejected.to_string());
+            if let Some(n) = live_sent {
+                // Messages the live view sent to at least one client.
+                meta.insert("live_sent".to_string(), n.to_string());
+            }
             writer
                 .metadata("shoal.recorder", meta)
                 .map_err(TaskError::failed("recording metadata"))?;
