@@ -323,3 +323,160 @@ fn a_dataflow_run_steps_each_stage_on_its_inputs_and_counts_the_deadlines_it_mis
     }
     assert_domain_clean(s["run_id"].as_str().unwrap());
 }
+
+/// A tmux server of its own (`-L`), killed when dropped, also on failure.
+struct Tmux(String);
+
+impl Tmux {
+    fn cmd(&self) -> std::process::Command {
+        let mut c = std::process::Command::new("tmux");
+        c.args(["-L", &self.0]);
+        c
+    }
+
+    fn screen(&self) -> String {
+        let o = self
+            .cmd()
+            .args(["capture-pane", "-p", "-t", "top"])
+            .output()
+            .unwrap();
+        String::from_utf8_lossy(&o.stdout).to_string()
+    }
+
+    fn alive(&self) -> bool {
+        self.cmd()
+            .args(["has-session", "-t", "top"])
+            .stderr(Stdio::null())
+            .status()
+            .map(|s| s.success())
+            .unwrap_or(false)
+    }
+}
+
+impl Drop for Tmux {
+    fn drop(&mut self) {
+        let _ = self.cmd().arg("kill-server").stderr(Stdio::null()).status();
+    }
+}
+
+/// Polls `f` every 100 ms until it holds or `timeout` passes.
+fn eventually(timeout: Duration, mut f: impl FnMut() -> bool) -> bool {
+    let start = std::time::Instant::now();
+    while start.elapsed() < timeout {
+        if f() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    false
+}
+
+#[test]
+fn shoal_top_shows_every_process_of_a_realtime_run_and_updates_under_a_terminal() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = write_scenario(tmp.path(), "top.toml", &small_scenario("top", 20.0));
+    let out = tmp.path().join("top");
+    let (mut run, run_id) = start_run(&scenario, &out, &["--mode", "realtime"], 10);
+
+    // One snapshot as JSON: every process of the run, each stepping (once
+    // each has published its first statistics, a second into the run).
+    let once = || -> serde_json::Value {
+        let o = shoal()
+            .args(["top", "--once", "--json"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let stepping = |snap: &serde_json::Value| {
+        let rows = snap["processes"].as_array().unwrap();
+        Some(rows.len() as u64) == snap["processes_expected"].as_u64()
+            && rows.iter().all(|r| r["steps"].as_u64() > Some(0))
+            && snap["hops"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|h| h["channel"] == "truth")
+    };
+    let mut snap = once();
+    let start = std::time::Instant::now();
+    while !stepping(&snap) && start.elapsed() < Duration::from_secs(20) {
+        snap = once();
+    }
+    assert!(stepping(&snap), "{snap}");
+    assert_eq!(snap["run_id"], run_id.as_str());
+    let expected = snap["processes_expected"].as_u64().unwrap();
+    let rows = snap["processes"].as_array().unwrap();
+    assert_eq!(snap["processes_running"].as_u64(), Some(expected));
+    for r in rows {
+        assert_eq!(r["state"], "running", "{r}");
+        assert!(r["pid"].as_u64().is_some(), "{r}");
+        assert!(r["rss_mib"].as_f64().unwrap() > 0.0, "{r}");
+    }
+    for kind in ["sim-plant", "planner", "mpc", "recorder", "world"] {
+        assert!(
+            rows.iter().any(|r| r["process"] == kind),
+            "no {kind}: {snap}"
+        );
+    }
+
+    // The live table under a pseudo-terminal: it shows the processes and
+    // its simulated time moves on; q quits.
+    let tmux = Tmux(format!("shoal-top-{}", std::process::id()));
+    let top = format!(
+        "{} top {}",
+        bin_dir().join("shoal").display(),
+        out.display()
+    );
+    let started = tmux
+        .cmd()
+        .args([
+            "new-session",
+            "-d",
+            "-s",
+            "top",
+            "-x",
+            "160",
+            "-y",
+            "60",
+            &top,
+        ])
+        .status()
+        .unwrap();
+    assert!(started.success());
+    assert!(
+        eventually(Duration::from_secs(20), || {
+            let s = tmux.screen();
+            s.contains("processes") && s.contains("recorder") && s.contains("planner")
+        }),
+        "the table never showed: {}",
+        tmux.screen()
+    );
+    let sim = |s: &str| -> Option<String> {
+        s.split("sim ")
+            .nth(1)
+            .map(|r| r.split(' ').next().unwrap_or("").to_string())
+    };
+    let first = sim(&tmux.screen());
+    assert!(first.is_some(), "{}", tmux.screen());
+    assert!(
+        eventually(Duration::from_secs(20), || sim(&tmux.screen()) != first),
+        "the table never updated from sim {first:?}: {}",
+        tmux.screen()
+    );
+    let quit = tmux
+        .cmd()
+        .args(["send-keys", "-t", "top", "q"])
+        .status()
+        .unwrap();
+    assert!(quit.success());
+    assert!(
+        eventually(Duration::from_secs(10), || !tmux.alive()),
+        "q did not quit"
+    );
+
+    signal(run.id(), libc::SIGINT);
+    let _ = run.wait();
+    assert_domain_clean(&run_id);
+}

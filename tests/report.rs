@@ -72,6 +72,17 @@ fn every_run_leaves_a_report_that_a_browser_shows_whole() {
     assert!(errors.trim().is_empty(), "the page reports: {errors}");
     let figures = html.matches("<figure>").count();
     assert!(figures >= 6, "{figures} figures");
+    // It says how to open the run in Foxglove and Rerun, linking the files
+    // beside it: the recording, and the export the command it names writes.
+    assert!(html.contains("href=\"recording.mcap\"") && out.join("recording.mcap").is_file());
+    assert!(html.contains("href=\"foxglove.mcap\"") && html.contains("rerun foxglove.mcap"));
+    let o = run_shoal_ok(&[
+        "export",
+        out.join("recording.mcap").to_str().unwrap(),
+        "--foxglove",
+        out.join("foxglove.mcap").to_str().unwrap(),
+    ]);
+    assert!(o.status.success() && out.join("foxglove.mcap").is_file());
     assert_eq!(
         body_attr(&dom, "data-images").and_then(|n| n.parse::<usize>().ok()),
         Some(figures),

@@ -737,10 +737,11 @@ described! {
 }
 
 sample! {
-    /// One process's runtime statistics, cumulative since its start, published
+    /// One process's runtime statistics, cumulative since its start (the
+    /// `recent_` fields: over the last publishing period), published
     /// on the run's `stats` channel about once a second (simulated time in
     /// lockstep, wall time in realtime) and recorded.
-    pub struct ProcessStats("shoal_msgs/msg/ProcessStats", "shoal.ProcessStats.v1", size = 144 + 64 * MAX_HOPS, measured = true) {
+    pub struct ProcessStats("shoal_msgs/msg/ProcessStats", "shoal.ProcessStats.v2", size = 160 + 64 * MAX_HOPS, measured = true) {
         /// Common header.
         pub header: Header,
         /// Vehicle (`run` for run-level processes), NUL-padded ASCII.
@@ -761,6 +762,11 @@ sample! {
         pub step_p99_ns: u64,
         /// Longest step, ns.
         pub step_max_ns: u64,
+        /// Step duration median over the last publishing period (about a
+        /// second), ns; 0 when it had no step.
+        pub recent_step_p50_ns: u64,
+        /// Step duration 99th percentile over the last publishing period, ns.
+        pub recent_step_p99_ns: u64,
         /// Realtime: lateness of the wake-up after its activation time, 99th percentile, ns.
         pub wake_late_p99_ns: u64,
         /// Entries of `hops` in use.

@@ -34,3 +34,4 @@ pub mod preflight;
 pub mod progress;
 pub mod replay;
 pub mod report;
+pub mod top;

@@ -15,6 +15,7 @@ mod recover;
 mod replay;
 mod run;
 mod summarize;
+mod top;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -105,6 +106,10 @@ enum Cmd {
     /// start and reap this host's processes, bridge what crosses hosts onto
     /// Zenoh, follow the coordinator's lockstep clock.
     Host(host::HostCmd),
+    /// A live table of a running run's processes: step times, CPU,
+    /// memory, restarts, samples lost, per-input latency, the recorder's
+    /// throughput, the latest events.
+    Top(top::TopCmd),
     /// Benchmarks that print figures.
     #[command(subcommand)]
     Bench(BenchCmd),
@@ -165,6 +170,7 @@ pub fn main() -> ExitCode {
         Cmd::Export(cmd) => export::run(cmd),
         Cmd::Recover(cmd) => recover::run(cmd),
         Cmd::Replay(cmd) => replay::run(cmd),
+        Cmd::Top(cmd) => top::run(cmd),
         Cmd::Bench(BenchCmd::Ipc(cmd)) => bench::ipc::run(cmd),
         Cmd::Bench(BenchCmd::Run(cmd)) => bench::run::run(cmd),
         Cmd::Bench(BenchCmd::Scale(cmd)) => bench::scale::run(cmd),

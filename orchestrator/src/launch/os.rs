@@ -464,3 +464,21 @@ pub fn thread_cpu_s() -> f64 {
 pub fn own_memory() -> Option<MemReading> {
     parse_status(&std::fs::read_to_string("/proc/self/status").ok()?)
 }
+
+/// Clock ticks per second of `/proc/PID/stat`'s CPU times (`_SC_CLK_TCK`).
+pub fn clock_ticks_per_s() -> f64 {
+    // SAFETY: sysconf only reads a constant.
+    let t = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+    if t > 0 {
+        t as f64
+    } else {
+        100.0
+    }
+}
+
+/// The page size, bytes (`/proc/PID/statm` counts pages).
+pub fn page_size() -> u64 {
+    // SAFETY: sysconf only reads a constant.
+    let p = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
+    u64::try_from(p).unwrap_or(4096).max(1)
+}

@@ -417,6 +417,10 @@ const PLAYER: &str = r#"
 })();
 "#;
 
+/// How to look at the run in Foxglove and Rerun: the files beside the
+/// report, linked relatively.
+const VIEWERS: &str = "<h2 id=\"viewers\">In Foxglove and Rerun</h2>\n<p>The run's recording, <a href=\"recording.mcap\">recording.mcap</a>, opens as it is in Foxglove (Open local file: every channel in its <code>shoal_msgs</code> schema, the camera frames in the Image panel) and in Rerun (<code>rerun recording.mcap</code>).</p>\n<p>For the 3D scene (obstacles, hulls, slots, sonar beams, lines of sight, poses), <code>shoal export recording.mcap --foxglove foxglove.mcap</code> writes <a href=\"foxglove.mcap\">foxglove.mcap</a> beside this page in Foxglove's own schemas: in Foxglove, Open local file, then a 3D panel with display frame <code>world</code>; in Rerun, <code>rerun foxglove.mcap</code> (transforms, poses and scene updates).</p>\n<p>While a run goes, <code>shoal run --live</code> serves it to Foxglove (Open connection, Foxglove WebSocket, <code>ws://127.0.0.1:8765</code>) and <code>shoal top</code> shows its processes.</p>\n";
+
 /// Writes `report.html` into `out`: `summary` and `scenario` of the run,
 /// its figures from `out/plots/`, its animation from `rec`. Returns the
 /// file.
@@ -484,6 +488,7 @@ pub fn write_report(
             esc(caption)
         );
     }
+    h.push_str(VIEWERS);
     let data = serde_json::to_string(&animation(scenario, rec))?;
     // `</` cannot end the script element early inside JSON.
     let data = data.replace("</", "<\\/");

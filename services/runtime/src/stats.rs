@@ -120,6 +120,8 @@ pub(crate) struct StatsReporter<S: Service> {
     process: String,
     run_id: String,
     step: LatencyRecorder,
+    /// Steps since the last publication (`recent_step_*`).
+    recent: LatencyRecorder,
     wake_late: LatencyRecorder,
     next_ns: u64,
 }
@@ -138,6 +140,7 @@ impl<S: Service> StatsReporter<S> {
             process: args.process.clone(),
             run_id: args.run_id.clone(),
             step: LatencyRecorder::new(),
+            recent: LatencyRecorder::new(),
             wake_late: LatencyRecorder::new(),
             next_ns: PUBLISH_EVERY_NS,
         }
@@ -146,9 +149,11 @@ impl<S: Service> StatsReporter<S> {
     /// Records one step; publishes the statistics when a second has passed.
     pub(crate) fn after_step(&mut self, ctx: &StepContext, step_ns: u64, report: &RunReport) {
         self.step.record_ns(step_ns);
+        self.recent.record_ns(step_ns);
         if ctx.sim_time_ns >= self.next_ns {
             self.next_ns = (ctx.sim_time_ns / PUBLISH_EVERY_NS + 1) * PUBLISH_EVERY_NS;
             let sample = self.sample(report);
+            self.recent = LatencyRecorder::new();
             if let Some(p) = self.publisher.as_mut() {
                 if let Err(e) = p.publish(sample, ctx, Origin::default()) {
                     tracing::debug!(%e, "stats not published");
@@ -172,6 +177,11 @@ impl<S: Service> StatsReporter<S> {
         s.step_p50_ns = p50;
         s.step_p99_ns = p99;
         s.step_max_ns = self.step.max_ns();
+        if self.recent.count() > 0 {
+            let [p50, p99] = self.recent.quantiles_ns([0.5, 0.99]);
+            s.recent_step_p50_ns = p50;
+            s.recent_step_p99_ns = p99;
+        }
         s.wake_late_p99_ns = self.wake_late.quantile_ns(0.99);
         let mut n = 0;
         let (mut lost, mut rejected) = (0, 0);
