@@ -287,8 +287,9 @@ fn a_live_run_serves_what_it_records_to_a_foxglove_protocol_client_and_a_stalled
         "/F1/leader_pose",
         "/F2/sonar",
     ];
+    let scene = ["/tf", "/scene/vehicles", "/scene/slots", "/L/pose"];
     let mut args = vec![url.as_str()];
-    for t in &topics {
+    for t in topics.iter().chain(&scene) {
         args.extend(["--subscribe", t]);
     }
     args.extend(["--count", "20"]);
@@ -308,7 +309,9 @@ fn a_live_run_serves_what_it_records_to_a_foxglove_protocol_client_and_a_stalled
     );
     assert_eq!(summary(&run_dir)["verdict"]["pass"], true);
 
-    // Every channel of the recording was advertised, with its schema.
+    // Every channel of the recording was advertised, with its schema, and
+    // beside them the view `shoal export --foxglove` writes, in Foxglove's
+    // schemas.
     let rec = Recording::open(&run_dir.join("recording.mcap")).unwrap();
     let recorded: BTreeSet<(String, String)> = rec
         .channels()
@@ -321,7 +324,33 @@ fn a_live_run_serves_what_it_records_to_a_foxglove_protocol_client_and_a_stalled
         .iter()
         .map(|(t, s)| (t.clone(), s.as_str().unwrap().to_string()))
         .collect();
-    assert_eq!(advertised, recorded);
+    assert!(
+        advertised.is_superset(&recorded),
+        "{:?}",
+        recorded.difference(&advertised)
+    );
+    for (topic, schema) in advertised.difference(&recorded) {
+        assert!(schema.starts_with("foxglove."), "{topic}: {schema}");
+    }
+    for topic in scene {
+        // The static scene goes out once a simulated second.
+        let least = if topic == "/scene/vehicles" { 3 } else { 20 };
+        assert!(
+            live["subscribed"][topic]["count"].as_u64() >= Some(least),
+            "{topic}: {live}"
+        );
+    }
+    let entities =
+        |topic: &str| -> BTreeSet<String> { strings(&live["subscribed"][topic]["entities"]) };
+    assert!(entities("/scene/vehicles").is_superset(&BTreeSet::from([
+        "vehicle/L".to_string(),
+        "vehicle/F1".to_string(),
+        "vehicle/F2".to_string()
+    ])));
+    assert_eq!(
+        entities("/scene/slots"),
+        BTreeSet::from(["slot/F1".to_string(), "slot/F2".to_string()])
+    );
     assert!(live["server"].as_str().unwrap().starts_with("shoal run"));
 
     // What came live is what was recorded: the same bytes at the same time,

@@ -4,8 +4,9 @@ the Foxglove SDK serves under the subprotocol name `foxglove.sdk.v1`),
 written from the protocol's published specification with PyPI `websockets`,
 no shoal code and no Foxglove SDK: it connects to `shoal run --live`, reads
 `serverInfo` and the `advertise`ments, subscribes, and decodes the binary
-`messageData` frames with mcap-ros2-support's CDR decoder, built from the
-schema the server advertised.
+`messageData` frames from the schema the server advertised: `cdr` with
+mcap-ros2-support's decoder (the recorded channels), `protobuf` with the
+`protobuf` package from the advertised FileDescriptorSet (the scene).
 
 usage: live_client.py URL [--subscribe TOPIC]... [--count N] [--stall S]
 
@@ -17,14 +18,17 @@ usage: live_client.py URL [--subscribe TOPIC]... [--count N] [--stall S]
 
 Prints a JSON report: the server's name, every advertised topic with its
 schema, and per subscribed topic the messages received, their log times,
-the header's sim times and seqs as decoded, and each payload in hex (so a
-test can compare them with the recording's bytes).
+the header's sim times and seqs as decoded (CDR), the scene entities' ids
+(protobuf SceneUpdate), and each payload in hex (so a test can compare them
+with the recording's bytes).
 """
+import base64
 import json
 import struct
 import sys
 import time
 
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.records import Schema
 from mcap_ros2.decoder import DecoderFactory
 from websockets.sync.client import connect
@@ -42,6 +46,24 @@ def connect_retrying(url, timeout_s=30.0):
             if time.monotonic() > deadline:
                 raise SystemExit(f"cannot connect to {url}: {e}")
             time.sleep(0.1)
+
+
+def decoder_for(ch, factory):
+    """A decoder of the channel's messages, from what the server advertised."""
+    encoding, schema_encoding = ch["encoding"], ch.get("schemaEncoding")
+    if (encoding, schema_encoding) == ("cdr", "ros2msg"):
+        schema = Schema(id=ch["id"], name=ch["schemaName"], encoding="ros2msg",
+                        data=ch["schema"].encode())
+        return factory.decoder_for("cdr", schema)
+    if (encoding, schema_encoding) == ("protobuf", "protobuf"):
+        # a binary schema travels base64-encoded in the advertisement
+        fds = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(ch["schema"]))
+        pool = descriptor_pool.DescriptorPool()
+        for f in fds.file:
+            pool.Add(f)
+        cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(ch["schemaName"]))
+        return cls.FromString
+    raise SystemExit(f"{ch['topic']}: encoding {encoding}/{schema_encoding}")
 
 
 def main():
@@ -107,14 +129,13 @@ def session(ws, subscribe, count, stall):
         ch = channels[subscriptions[sid]]
         topic = ch["topic"]
         if topic not in decoders:
-            if ch["encoding"] != "cdr" or ch.get("schemaEncoding") != "ros2msg":
-                raise SystemExit(f"{topic}: encoding {ch['encoding']}/{ch.get('schemaEncoding')}")
-            schema = Schema(id=ch["id"], name=ch["schemaName"], encoding="ros2msg",
-                            data=ch["schema"].encode())
-            decoders[topic] = factory.decoder_for("cdr", schema)
+            decoders[topic] = decoder_for(ch, factory)
         decoded = decoders[topic](payload)
         entry = received.setdefault(topic, {"count": 0, "log_times": [], "sim_times": [],
-                                            "seqs": [], "payload_hex": []})
+                                            "seqs": [], "entities": [], "payload_hex": []})
+        for e in getattr(decoded, "entities", []):
+            if e.id not in entry["entities"]:
+                entry["entities"].append(e.id)
         entry["count"] += 1
         entry["log_times"].append(log_time)
         header = getattr(decoded, "header", None)

@@ -34,27 +34,16 @@
 //! and sonar mounts) comes from the recording's `shoal.run` metadata. Without
 //! it, only `/tf`, `/scene/vehicles`, `/scene/sonar` and the poses are written.
 
-mod convert;
-use convert::export_foxglove;
-mod foxglove;
-mod frames;
-mod scene;
-
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use ipc_types::{Beacons, Channel, LeaderPose, PlannerState, Sonar, Truth};
-use nalgebra::Vector3;
+use ipc_types::Channel;
 use shoal_scenario::Scenario;
-
-use foxglove::{FoxgloveMessage, FrameTransforms, PoseInFrame, SceneUpdate, Time};
-use frames::{body_frame, level_frame, level_rotation, to_foxglove, transform, NED_FRAME};
-use scene::{ScanView, SlotView, TruePose, VehicleLook};
-
-use crate::analysis::track::{unit_wxyz, Track};
+use shoal_view::foxglove::FoxgloveMessage;
+use shoal_view::{parse_topic, Converter, Out, ViewConfig};
 
 /// How an export is written.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -198,6 +187,21 @@ struct FoxgloveWriter<W: std::io::Write + std::io::Seek> {
     buf: Vec<u8>,
 }
 
+impl<W: std::io::Write + std::io::Seek> Out for FoxgloveWriter<W> {
+    fn write<T: FoxgloveMessage>(
+        &mut self,
+        topic: &str,
+        log_time_ns: u64,
+        msg: &T,
+    ) -> anyhow::Result<()> {
+        self.write_message(topic, log_time_ns, msg)
+    }
+
+    fn epoch_ns(&self) -> u64 {
+        self.epoch_ns
+    }
+}
+
 impl<W: std::io::Write + std::io::Seek> FoxgloveWriter<W> {
     fn new(w: W, epoch_ns: u64) -> anyhow::Result<Self> {
         let writer = mcap::WriteOptions::new()
@@ -272,7 +276,7 @@ impl<W: std::io::Write + std::io::Seek> FoxgloveWriter<W> {
     }
 
     /// Writes a Foxglove message (protobuf, its schema the type's own).
-    fn write<T: FoxgloveMessage>(
+    fn write_message<T: FoxgloveMessage>(
         &mut self,
         topic: &str,
         log_time_ns: u64,
@@ -321,133 +325,108 @@ impl<W: std::io::Write + std::io::Seek> FoxgloveWriter<W> {
     }
 }
 
-/// The scenario facts the view draws, with the defaults of each service
-/// where the recording has no scenario.
-struct ViewConfig {
-    /// Vehicle names in scenario (or topic) order.
-    vehicles: Vec<String>,
-    /// Follower → parent.
-    parents: HashMap<String, String>,
-    obstacles: Vec<sonar::Obstacle>,
-    camera: camera_pose::CameraConfig,
-    beacons: camera_pose::BeaconLayout,
-    hull: camera_pose::HullConfig,
-    sonar: sonar::SonarConfig,
-}
-
-impl ViewConfig {
-    fn from_recording(rec: &recordings::Recording, notes: &mut Vec<String>) -> Self {
-        let topic_vehicles = || -> Vec<String> {
-            let mut v: Vec<String> = rec
-                .channels()
-                .iter()
-                .filter_map(|c| parse_topic(&c.topic))
-                .filter(|(_, ch)| *ch == Channel::Truth)
-                .map(|(v, _)| v.to_string())
-                .collect();
-            v.dedup();
-            v
-        };
-        let scenario = match rec.run_meta("scenario_toml").map(Scenario::from_toml) {
-            Some(Ok(s)) => Some(s),
-            Some(Err(e)) => {
-                notes.push(format!("the recorded scenario does not parse ({e}): no obstacles, slots or lines of sight"));
-                None
-            }
-            None => {
-                notes.push("the recording has no scenario (shoal.run/scenario_toml): no obstacles, slots or lines of sight".into());
-                None
-            }
-        };
-        let Some(s) = scenario else {
-            return Self {
-                vehicles: topic_vehicles(),
-                parents: HashMap::new(),
-                obstacles: Vec::new(),
-                camera: Default::default(),
-                beacons: Default::default(),
-                hull: Default::default(),
-                sonar: Default::default(),
-            };
-        };
-        fn section<T: serde::de::DeserializeOwned + Default>(
-            s: &Scenario,
-            key: &str,
-            notes: &mut Vec<String>,
-        ) -> T {
-            s.section(key).unwrap_or_else(|e| {
-                notes.push(format!(
-                    "[{key}] of the recorded scenario: {e}; drawn with defaults"
-                ));
-                T::default()
-            })
-        }
-        let obstacles = s.obstacles_as::<sonar::Obstacle>().unwrap_or_else(|e| {
+/// The view of a recording: its `shoal.run` scenario, else its topics.
+fn view_of(rec: &recordings::Recording, notes: &mut Vec<String>) -> ViewConfig {
+    let topic_vehicles = || -> Vec<String> {
+        let mut v: Vec<String> = rec
+            .channels()
+            .iter()
+            .filter_map(|c| parse_topic(&c.topic))
+            .filter(|(_, ch)| *ch == Channel::Truth)
+            .map(|(v, _)| v.to_string())
+            .collect();
+        v.dedup();
+        v
+    };
+    let scenario = match rec.run_meta("scenario_toml").map(Scenario::from_toml) {
+        Some(Ok(s)) => Some(s),
+        Some(Err(e)) => {
             notes.push(format!(
-                "obstacles of the recorded scenario: {e}; not drawn"
+                "the recorded scenario does not parse ({e}): no obstacles, slots or lines of sight"
             ));
-            Vec::new()
-        });
-        Self {
-            vehicles: s.vehicles.iter().map(|v| v.name.clone()).collect(),
-            parents: s
-                .vehicles
-                .iter()
-                .filter_map(|v| v.parent.clone().map(|p| (v.name.clone(), p)))
-                .collect(),
-            obstacles,
-            camera: section(&s, "camera", notes),
-            beacons: section(&s, "beacons", notes),
-            hull: section(&s, "hull", notes),
-            sonar: section(&s, "sonar", notes),
+            None
         }
-    }
-
-    fn look(&self, name: &str) -> VehicleLook {
-        let is_parent = self.parents.values().any(|p| p == name);
-        VehicleLook {
-            name: name.to_string(),
-            leader: !self.parents.contains_key(name),
-            beacons_body_m: if is_parent {
-                self.beacons.positions_body_m.clone()
-            } else {
-                Vec::new()
-            },
-            hull_length_m: self.hull.length_m,
-            hull_radius_m: self.hull.radius_m,
+        None => {
+            notes.push("the recording has no scenario (shoal.run/scenario_toml): no obstacles, slots or lines of sight".into());
+            None
         }
+    };
+    ViewConfig::from_scenario(scenario.as_ref(), topic_vehicles, notes)
+}
+
+/// Converts a loaded recording; writes the MCAP to `w`.
+fn export_foxglove<W: std::io::Write + std::io::Seek>(
+    rec: &recordings::Recording,
+    w: W,
+    progress: bool,
+    epoch_ns: u64,
+) -> anyhow::Result<ExportReport> {
+    let mut notes = Vec::new();
+    let cfg = view_of(rec, &mut notes);
+    let out = FoxgloveWriter::new(w, epoch_ns)?;
+
+    // Per input channel: (vehicle, channel) for the ones the view uses.
+    let routes: HashMap<u16, (String, Channel)> = rec
+        .channels()
+        .iter()
+        .filter_map(|c| parse_topic(&c.topic).map(|(v, ch)| (c.id, (v.to_string(), ch))))
+        .collect();
+    // Camera frames go across unchanged, on their own topic.
+    let images: HashMap<u16, String> = rec
+        .channels()
+        .iter()
+        .filter(|c| c.schema_name == recordings::image::SCHEMA_NAME)
+        .map(|c| (c.id, c.topic.clone()))
+        .collect();
+    // Time order; at equal times truth first, so everything at t sees truth at t.
+    let msgs = rec.messages();
+    let mut order: Vec<usize> = (0..msgs.len())
+        .filter(|i| {
+            routes.contains_key(&msgs[*i].channel) || images.contains_key(&msgs[*i].channel)
+        })
+        .collect();
+    order.sort_by_key(|i| {
+        let m = &msgs[*i];
+        let truth = routes.get(&m.channel).map(|r| r.1) == Some(Channel::Truth);
+        (m.log_time, !truth)
+    });
+
+    let mut conv = Converter::new(cfg, out);
+    conv.static_scene(order.first().map(|i| msgs[*i].log_time).unwrap_or(0))?;
+    let bar = crate::progress::bar(progress, order.len() as u64, "messages");
+    for (n, i) in order.iter().enumerate() {
+        if n % 4096 == 0 {
+            bar.set_position(n as u64);
+        }
+        let m = &msgs[*i];
+        if let Some(topic) = images.get(&m.channel) {
+            conv.out.write_image(topic, m.log_time, &m.data)?;
+            continue;
+        }
+        let Some((vehicle, channel)) = routes.get(&m.channel) else {
+            continue;
+        };
+        conv.message(vehicle, *channel, m.log_time, &m.data)?;
     }
-}
-
-/// `/<vehicle>/<channel>` → (vehicle, channel).
-fn parse_topic(topic: &str) -> Option<(&str, Channel)> {
-    let rest = topic.strip_prefix('/')?;
-    let (vehicle, name) = rest.split_once('/')?;
-    Channel::ALL
-        .into_iter()
-        .find(|c| c.name() == name)
-        .map(|c| (vehicle, c))
-}
-
-/// The true pose of `track` at its last sample at or before `t`.
-fn pose_at(track: &Track, t: u64) -> Option<TruePose> {
-    track.latest(t).map(|i| TruePose {
-        position: track.p[i],
-        attitude: track.q[i],
-    })
-}
-
-fn finite(v: &[f64]) -> bool {
-    v.iter().all(|x| x.is_finite())
+    conv.flush_tf()?;
+    bar.finish_and_clear();
+    if conv.skipped() > 0 {
+        notes.push(format!(
+            "{} samples skipped (wrong size or non-finite values)",
+            conv.skipped()
+        ));
+    }
+    conv.out.finish(notes)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
-    use ipc_types::Sample;
+    use ipc_types::{Beacons, PlannerState, Sample, Sonar, Truth};
     use recordings::{RecordingWriter, WriterOptions};
     use serde_json::Value;
+    use shoal_view::foxglove::{FrameTransforms, PoseInFrame, SceneUpdate};
 
     const SCENARIO: &str = r#"
 name = "unit"

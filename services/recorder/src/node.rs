@@ -314,7 +314,7 @@ impl RecorderTask {
         }
         let live = match live {
             Some(addr) => {
-                let mut l = crate::live::Live::start(addr, &run)?;
+                let mut l = crate::live::Live::start(addr, &run, scenario)?;
                 for tap in &taps {
                     if let Some(schema) = writer.channel_schema(tap.channel()) {
                         l.add(tap.channel(), schema)?;
@@ -358,6 +358,9 @@ impl RecorderTask {
             if let Some(live) = self.live.as_mut() {
                 live.log(channel, p.sim_time_ns, writer.last_message());
             }
+        }
+        if let (Some(live), Some(last)) = (self.live.as_mut(), self.batch.last()) {
+            live.batch_done(last.sim_time_ns);
         }
         // Close a chunk each simulated second, so a recorder that dies loses
         // about a second of the run at any speed (a wall-clock period would

@@ -3,12 +3,12 @@
 
 use nalgebra::{UnitQuaternion, Vector3};
 
-use super::foxglove::{
+use crate::foxglove::{
     entity, line, meta, point, pose, pose_at, rgba, sphere, vector, ArrowPrimitive, Color,
     CubePrimitive, CylinderPrimitive, LineType, SceneEntity, TextPrimitive, Time,
     TriangleListPrimitive,
 };
-use super::frames::{body_frame, level_frame, level_rotation, to_foxglove, NED_FRAME};
+use crate::frames::{body_frame, level_frame, level_rotation, to_foxglove, NED_FRAME};
 
 /// Obstacles: sandy, half transparent.
 const OBSTACLE: Color = rgba(0.76, 0.62, 0.42, 0.55);
@@ -189,7 +189,7 @@ pub fn slot_entity(
     parent_pose: &TruePose,
 ) -> SceneEntity {
     let mut e = entity(t, &level_frame(parent), format!("slot/{follower}"), true);
-    let yaw = super::frames::yaw_of(&parent_pose.attitude);
+    let yaw = crate::frames::yaw_of(&parent_pose.attitude);
     let here = level_rotation(yaw).inverse() * (follower_pose.position - parent_pose.position);
     let err = (here - Vector3::from(slot.filtered_m)).norm();
     meta(&mut e, "follower", follower);
@@ -336,7 +336,7 @@ mod tests {
             mount_body_m: [0.8, 0.0, 0.0],
             range_max_m: 20.0,
         };
-        let e = sonar_entity(super::super::foxglove::time_from_ns(0), "L", &scan);
+        let e = sonar_entity(crate::foxglove::time_from_ns(0), "L", &scan);
         assert_eq!(e.frame_id, "L/body");
         let p = &e.lines[0].points;
         assert_eq!(p.len(), 4);
@@ -362,7 +362,7 @@ mod tests {
             mode: 1,
         };
         let e = slot_entity(
-            super::super::foxglove::time_from_ns(0),
+            crate::foxglove::time_from_ns(0),
             "F1",
             "L",
             &slot,
@@ -385,7 +385,7 @@ mod tests {
             half_extents_m: [10.0, 5.0, 15.0],
             yaw_deg: 90.0,
         };
-        let e = obstacle_entity(super::super::foxglove::time_from_ns(0), 0, &o);
+        let e = obstacle_entity(crate::foxglove::time_from_ns(0), 0, &o);
         let c = &e.cubes[0];
         let size = c.size.unwrap();
         assert_eq!((size.x, size.y, size.z), (20.0, 10.0, 30.0));
@@ -407,7 +407,7 @@ mod tests {
             (Vector3::new(5.0, 0.0, 0.0), true),
             (Vector3::new(5.0, 1.0, 0.0), false),
         ];
-        let e = line_of_sight_entity(super::super::foxglove::time_from_ns(0), "F1", "L", &cam, &b);
+        let e = line_of_sight_entity(crate::foxglove::time_from_ns(0), "F1", "L", &cam, &b);
         assert_eq!(e.lines[0].points.len(), 4);
         assert_eq!(e.lines[0].colors[0], SEEN);
         assert_eq!(e.lines[0].colors[2], UNSEEN);

@@ -1,87 +1,147 @@
-//! The conversion proper: every message the view uses, in time order, into
-//! Foxglove's scene, transforms and poses (one method per channel).
+//! The conversion proper: every sample the view uses, in time order, into
+//! Foxglove's scene, transforms and poses (one method per channel), written
+//! to an [`Out`]: an MCAP file (`shoal export`) or a live server (`shoal
+//! run --live`).
 
-use super::*;
+use std::collections::HashMap;
 
-/// Converts a loaded recording; writes the MCAP to `w`.
-pub(super) fn export_foxglove<W: std::io::Write + std::io::Seek>(
-    rec: &recordings::Recording,
-    w: W,
-    progress: bool,
-    epoch_ns: u64,
-) -> anyhow::Result<ExportReport> {
-    let mut notes = Vec::new();
-    let cfg = ViewConfig::from_recording(rec, &mut notes);
-    let out = FoxgloveWriter::new(w, epoch_ns)?;
+use ipc_types::{Beacons, Channel, LeaderPose, PlannerState, Sonar, Truth};
+use nalgebra::Vector3;
+use shoal_scenario::Scenario;
 
-    // Per input channel: (vehicle, channel) for the ones the view uses.
-    let routes: HashMap<u16, (String, Channel)> = rec
-        .channels()
-        .iter()
-        .filter_map(|c| parse_topic(&c.topic).map(|(v, ch)| (c.id, (v.to_string(), ch))))
-        .collect();
-    // Camera frames go across unchanged, on their own topic.
-    let images: HashMap<u16, String> = rec
-        .channels()
-        .iter()
-        .filter(|c| c.schema_name == recordings::image::SCHEMA_NAME)
-        .map(|c| (c.id, c.topic.clone()))
-        .collect();
-    // Time order; at equal times truth first, so everything at t sees truth at t.
-    let msgs = rec.messages();
-    let mut order: Vec<usize> = (0..msgs.len())
-        .filter(|i| {
-            routes.contains_key(&msgs[*i].channel) || images.contains_key(&msgs[*i].channel)
-        })
-        .collect();
-    order.sort_by_key(|i| {
-        let m = &msgs[*i];
-        let truth = routes.get(&m.channel).map(|r| r.1) == Some(Channel::Truth);
-        (m.log_time, !truth)
-    });
+use crate::foxglove::{self, FoxgloveMessage, FrameTransforms, PoseInFrame, SceneUpdate, Time};
+use crate::frames::{
+    self, body_frame, level_frame, level_rotation, to_foxglove, transform, NED_FRAME,
+};
+use crate::scene::{self, ScanView, SlotView, TruePose, VehicleLook};
+use crate::track::{unit_wxyz, Track};
 
-    let mut conv = Converter {
-        cfg,
-        out,
-        tracks: HashMap::new(),
-        tf_time: None,
-        tf: FrameTransforms {
-            transforms: Vec::new(),
-        },
-        skipped: 0,
-    };
-    conv.static_scene(order.first().map(|i| msgs[*i].log_time).unwrap_or(0))?;
-    let bar = crate::progress::bar(progress, order.len() as u64, "messages");
-    for (n, i) in order.iter().enumerate() {
-        if n % 4096 == 0 {
-            bar.set_position(n as u64);
-        }
-        let m = &msgs[*i];
-        if let Some(topic) = images.get(&m.channel) {
-            conv.out.write_image(topic, m.log_time, &m.data)?;
-            continue;
-        }
-        let Some((vehicle, channel)) = routes.get(&m.channel) else {
-            continue;
+/// Where the view's messages go.
+pub trait Out {
+    /// Writes `msg` on `topic` at simulated time `log_time_ns`.
+    fn write<T: FoxgloveMessage>(
+        &mut self,
+        topic: &str,
+        log_time_ns: u64,
+        msg: &T,
+    ) -> anyhow::Result<()>;
+    /// Added to every message's own timestamps (the run's wall-clock
+    /// start with `--epoch`, else 0).
+    fn epoch_ns(&self) -> u64;
+}
+
+/// The scenario facts the view draws, with the defaults of each service
+/// where the recording has no scenario.
+pub struct ViewConfig {
+    /// Vehicle names in scenario (or topic) order.
+    pub vehicles: Vec<String>,
+    /// Follower → parent.
+    pub parents: HashMap<String, String>,
+    pub obstacles: Vec<sonar::Obstacle>,
+    pub camera: camera_pose::CameraConfig,
+    pub beacons: camera_pose::BeaconLayout,
+    pub hull: camera_pose::HullConfig,
+    pub sonar: sonar::SonarConfig,
+}
+
+impl ViewConfig {
+    /// The view of `scenario` (defaults for what it cannot give, each
+    /// named in `notes`); without one, the vehicles `without` lists and
+    /// nothing else.
+    pub fn from_scenario(
+        scenario: Option<&Scenario>,
+        without: impl FnOnce() -> Vec<String>,
+        notes: &mut Vec<String>,
+    ) -> Self {
+        let Some(s) = scenario else {
+            return Self {
+                vehicles: without(),
+                parents: HashMap::new(),
+                obstacles: Vec::new(),
+                camera: Default::default(),
+                beacons: Default::default(),
+                hull: Default::default(),
+                sonar: Default::default(),
+            };
         };
-        conv.message(vehicle, *channel, m.log_time, &m.data)?;
+        fn section<T: serde::de::DeserializeOwned + Default>(
+            s: &Scenario,
+            key: &str,
+            notes: &mut Vec<String>,
+        ) -> T {
+            s.section(key).unwrap_or_else(|e| {
+                notes.push(format!(
+                    "[{key}] of the recorded scenario: {e}; drawn with defaults"
+                ));
+                T::default()
+            })
+        }
+        let obstacles = s.obstacles_as::<sonar::Obstacle>().unwrap_or_else(|e| {
+            notes.push(format!(
+                "obstacles of the recorded scenario: {e}; not drawn"
+            ));
+            Vec::new()
+        });
+        Self {
+            vehicles: s.vehicles.iter().map(|v| v.name.clone()).collect(),
+            parents: s
+                .vehicles
+                .iter()
+                .filter_map(|v| v.parent.clone().map(|p| (v.name.clone(), p)))
+                .collect(),
+            obstacles,
+            camera: section(s, "camera", notes),
+            beacons: section(s, "beacons", notes),
+            hull: section(s, "hull", notes),
+            sonar: section(s, "sonar", notes),
+        }
     }
-    conv.flush_tf()?;
-    bar.finish_and_clear();
-    if conv.skipped > 0 {
-        notes.push(format!(
-            "{} samples skipped (wrong size or non-finite values)",
-            conv.skipped
-        ));
+
+    /// How vehicle `name` is drawn.
+    pub fn look(&self, name: &str) -> VehicleLook {
+        let is_parent = self.parents.values().any(|p| p == name);
+        VehicleLook {
+            name: name.to_string(),
+            leader: !self.parents.contains_key(name),
+            beacons_body_m: if is_parent {
+                self.beacons.positions_body_m.clone()
+            } else {
+                Vec::new()
+            },
+            hull_length_m: self.hull.length_m,
+            hull_radius_m: self.hull.radius_m,
+        }
     }
-    conv.out.finish(notes)
+}
+
+/// `/<vehicle>/<channel>` → (vehicle, channel).
+pub fn parse_topic(topic: &str) -> Option<(&str, Channel)> {
+    let rest = topic.strip_prefix('/')?;
+    let (vehicle, name) = rest.split_once('/')?;
+    Channel::ALL
+        .into_iter()
+        .find(|c| c.name() == name)
+        .map(|c| (vehicle, c))
+}
+
+/// The true pose of `track` at its last sample at or before `t`.
+fn pose_at(track: &Track, t: u64) -> Option<TruePose> {
+    track.latest(t).map(|i| TruePose {
+        position: track.p[i],
+        attitude: track.q[i],
+    })
+}
+
+fn finite(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite())
 }
 
 /// The state of a conversion: the view, the output, every vehicle's true
 /// poses so far, the transforms of the current time step.
-struct Converter<W: std::io::Write + std::io::Seek> {
+pub struct Converter<O: Out> {
     cfg: ViewConfig,
-    out: FoxgloveWriter<W>,
+    /// Where the messages go.
+    pub out: O,
     tracks: HashMap<String, Track>,
     /// Truth of the current time step, flushed as one /tf message.
     tf_time: Option<u64>,
@@ -98,15 +158,42 @@ enum Done {
     Skipped,
 }
 
-impl<W: std::io::Write + std::io::Seek> Converter<W> {
+impl<O: Out> Converter<O> {
+    /// A conversion of the view `cfg` into `out`, nothing seen yet.
+    pub fn new(cfg: ViewConfig, out: O) -> Self {
+        Self {
+            cfg,
+            out,
+            tracks: HashMap::new(),
+            tf_time: None,
+            tf: FrameTransforms {
+                transforms: Vec::new(),
+            },
+            skipped: 0,
+        }
+    }
+
+    /// Samples that could not be decoded or held non-finite values.
+    pub fn skipped(&self) -> u64 {
+        self.skipped
+    }
+
+    /// Forgets every vehicle's poses older than `t_ns` (a live view keeps
+    /// memory bounded; what needs a pose looks back at most a second).
+    pub fn forget_before(&mut self, t_ns: u64) {
+        for track in self.tracks.values_mut() {
+            track.forget_before(t_ns);
+        }
+    }
+
     /// A message's own timestamp for simulated time `ns`: shifted as the
     /// log times are.
     fn time(&self, ns: u64) -> Time {
-        foxglove::time_from_ns(ns.saturating_add(self.out.epoch_ns))
+        foxglove::time_from_ns(ns.saturating_add(self.out.epoch_ns()))
     }
 
     /// The static scene (obstacles, vehicle models), at time `t0`.
-    fn static_scene(&mut self, t0: u64) -> anyhow::Result<()> {
+    pub fn static_scene(&mut self, t0: u64) -> anyhow::Result<()> {
         let ts0 = self.time(t0);
         if !self.cfg.obstacles.is_empty() {
             let update = SceneUpdate {
@@ -137,7 +224,7 @@ impl<W: std::io::Write + std::io::Seek> Converter<W> {
     }
 
     /// Converts one message of `vehicle`'s `channel`.
-    fn message(
+    pub fn message(
         &mut self,
         vehicle: &str,
         channel: Channel,
@@ -165,7 +252,7 @@ impl<W: std::io::Write + std::io::Seek> Converter<W> {
     }
 
     /// Writes the transforms of the current time step as one `/tf` message.
-    fn flush_tf(&mut self) -> anyhow::Result<()> {
+    pub fn flush_tf(&mut self) -> anyhow::Result<()> {
         if let Some(t) = self.tf_time.take() {
             self.out.write("/tf", t, &self.tf)?;
             self.tf.transforms.clear();

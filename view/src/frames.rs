@@ -14,7 +14,7 @@
 
 use nalgebra::{Quaternion as NQuat, UnitQuaternion, Vector3};
 
-use super::foxglove::{vector, FrameTransform, Quaternion, Time};
+use crate::foxglove::{vector, FrameTransform, Quaternion, Time};
 
 /// The display root: ENU, z up. Pick it as Foxglove's display frame.
 pub const WORLD_FRAME: &str = "world";
@@ -99,7 +99,7 @@ pub fn transform(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::track::unit_wxyz;
+    use crate::track::unit_wxyz;
     use approx::assert_relative_eq;
     use nalgebra::Point3;
 
@@ -142,7 +142,7 @@ mod tests {
         // A proper rotation (det +1), so Foxglove can use it as a transform.
         let m = world_from_ned().to_rotation_matrix();
         assert_relative_eq!(m.matrix().determinant(), 1.0, epsilon = 1e-12);
-        let f = world_to_ned_transform(super::super::foxglove::time_from_ns(0))
+        let f = world_to_ned_transform(crate::foxglove::time_from_ns(0))
             .rotation
             .unwrap();
         assert_eq!((f.w, f.z), (0.0, 0.0));
@@ -211,7 +211,7 @@ mod tests {
     fn quaternion_order_and_level_frame() {
         // shoal's [w, x, y, z] becomes Foxglove's {x, y, z, w}.
         let q = unit_wxyz([2.0, 0.0, 0.0, 0.0]).unwrap();
-        assert_eq!(to_foxglove(&q), super::super::foxglove::IDENTITY);
+        assert_eq!(to_foxglove(&q), crate::foxglove::IDENTITY);
         let c = 0.8f64;
         let s = 0.6f64;
         let f = to_foxglove(&unit_wxyz([c, s, 0.0, 0.0]).unwrap());
