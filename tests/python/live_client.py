@@ -139,7 +139,8 @@ def session(ws, subscribe, count, stall):
         entry["count"] += 1
         entry["log_times"].append(log_time)
         header = getattr(decoded, "header", None)
-        if header is not None:
+        # shoal's own header (a camera frame's is std_msgs/Header: a stamp)
+        if hasattr(header, "sim_time_ns"):
             entry["sim_times"].append(header.sim_time_ns)
             entry["seqs"].append(header.seq)
         entry["payload_hex"].append(bytes(payload).hex())
