@@ -358,28 +358,13 @@ fn a_live_run_serves_what_it_records_to_a_foxglove_protocol_client_and_a_stalled
     for topic in topics {
         let got = &live["subscribed"][topic];
         assert!(got["count"].as_u64().unwrap() >= 20, "{topic}: {got}");
-        let log_times: Vec<u64> = got["log_times"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_u64().unwrap())
-            .collect();
-        let sim_times: Vec<u64> = got["sim_times"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_u64().unwrap())
-            .collect();
+        let log_times: Vec<u64> = u64s(&got["log_times"]);
+        let sim_times: Vec<u64> = u64s(&got["sim_times"]);
         assert_eq!(
             log_times, sim_times,
             "{topic}: log time is the sample's sim time"
         );
-        let seqs: Vec<u64> = got["seqs"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_u64().unwrap())
-            .collect();
+        let seqs: Vec<u64> = u64s(&got["seqs"]);
         assert!(
             seqs.windows(2).all(|w| w[1] == w[0] + 1),
             "{topic}: a client that keeps up misses nothing: {seqs:?}"

@@ -95,12 +95,7 @@ fn paper_run_records_every_channel_and_the_official_readers_decode_it() {
     assert_eq!(py_pos, s5.position_ned_m.to_vec());
     let sonar = rec.samples::<ipc_types::Sonar>("/L/sonar");
     let s5 = sonar.iter().find(|t| t.header.seq == 5).unwrap();
-    let py_valid: Vec<u64> = report["samples"]["/L/sonar"]["valid"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_u64().unwrap())
-        .collect();
+    let py_valid: Vec<u64> = u64s(&report["samples"]["/L/sonar"]["valid"]);
     assert_eq!(
         py_valid,
         s5.valid.iter().map(|&v| u64::from(v)).collect::<Vec<_>>()

@@ -270,6 +270,15 @@ pub fn python_report<S: AsRef<std::ffi::OsStr>>(script: &str, args: &[S]) -> ser
     serde_json::from_slice(&o.stdout).unwrap()
 }
 
+/// A JSON array of unsigned integers (a checker's report), as numbers.
+pub fn u64s(v: &serde_json::Value) -> Vec<u64> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("not an array: {v}"))
+        .iter()
+        .map(|x| x.as_u64().unwrap_or_else(|| panic!("not a u64: {x}")))
+        .collect()
+}
+
 /// The `summary.json` of a finished run.
 pub fn summary(out: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
