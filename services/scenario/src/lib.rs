@@ -178,13 +178,15 @@ pub fn line_of_exact(text: &str, key: &str) -> Option<usize> {
 
 /// (the key's own line, the line of the nearest table above it).
 fn lines_of(text: &str, key: &str) -> Option<(Option<usize>, usize)> {
-    let mut pos = 0usize;
+    // One pass (a key looked up from the top at every line took minutes on
+    // a file of 10,000 vehicles).
+    let mut walk = PathWalk::default();
     let mut table_line = None;
     for (n, line) in text.split_inclusive('\n').enumerate() {
-        let indent = line.len() - line.trim_start().len();
         let t = line.trim();
+        let at = walk.line(line, true);
         if !t.is_empty() && !t.starts_with('#') {
-            if let Some(k) = key_at(text, Some(pos + indent)) {
+            if let Some(k) = at {
                 if k == key {
                     return Some((Some(n + 1), table_line.unwrap_or(n + 1)));
                 }
@@ -194,7 +196,6 @@ fn lines_of(text: &str, key: &str) -> Option<(Option<usize>, usize)> {
                 }
             }
         }
-        pos += line.len();
     }
     table_line.map(|t| (None, t))
 }
@@ -698,6 +699,13 @@ impl Scenario {
     /// value of the wrong type is reported with the key's full path
     /// (`vehicles[1].slot_m`) and its line.
     pub fn from_toml(text: &str) -> Result<Self, ScenarioError> {
+        if text.len() > MAX_SCENARIO_BYTES {
+            return Err(ScenarioError::Parse(format!(
+                "the scenario is {}, more than a scenario may be ({})",
+                mib(text.len() as u64),
+                mib(MAX_SCENARIO_BYTES as u64)
+            )));
+        }
         let s: Scenario = toml::from_str(text).map_err(|e| parse_error("", text, &e))?;
         s.validate()?;
         Ok(s)
@@ -736,6 +744,8 @@ impl Scenario {
     /// rates, and that no section sets a key the orchestrator derives
     /// ([`DERIVED_KEYS`]).
     pub fn validate(&self) -> Result<(), ScenarioError> {
+        // The counts first: nothing that grows with them runs before.
+        self.validate_sizes()?;
         faults::validate(self)?;
         for (section, key, from) in DERIVED_KEYS {
             if self.section_table(section)?.contains_key(key) {
@@ -891,6 +901,54 @@ impl Scenario {
             ));
         }
         self.validate_vehicles()
+    }
+
+    /// The group's size and every count, against the limits.
+    fn validate_sizes(&self) -> Result<(), ScenarioError> {
+        if self.vehicles.len() > ipc_types_max_vehicles() {
+            return Err(invalid(
+                "vehicles",
+                format!(
+                    "{} vehicles, at most {} fit in the world snapshot",
+                    self.vehicles.len(),
+                    ipc_types_max_vehicles()
+                ),
+            ));
+        }
+        if self.obstacles.len() > MAX_OBSTACLES {
+            return Err(invalid(
+                "obstacles",
+                format!(
+                    "{} obstacles, at most {MAX_OBSTACLES}",
+                    self.obstacles.len()
+                ),
+            ));
+        }
+        let count = |key: &str| -> usize {
+            self.obstacles
+                .iter()
+                .filter_map(|o| o.get(key).and_then(toml::Value::as_array))
+                .map(Vec::len)
+                .sum()
+        };
+        for (key, n) in [
+            ("triangles", count("triangles")),
+            ("vertices_ned_m", count("vertices_ned_m")),
+        ] {
+            if n > MAX_MESH_ELEMENTS {
+                return Err(invalid(
+                    "obstacles",
+                    format!("{n} mesh {key} in all, at most {MAX_MESH_ELEMENTS}"),
+                ));
+            }
+        }
+        if self.faults.len() > MAX_FAULTS {
+            return Err(invalid(
+                "faults",
+                format!("{} faults, at most {MAX_FAULTS}", self.faults.len()),
+            ));
+        }
+        Ok(())
     }
 
     fn validate_vehicles(&self) -> Result<(), ScenarioError> {
@@ -1253,6 +1311,25 @@ const fn ipc_types_max_vehicles() -> usize {
     MAX_VEHICLES
 }
 
+/// Largest scenario, bytes: far above any course (a generated group of 100
+/// with its course is about 50 KiB), small enough that reading and parsing
+/// it stays well under a second.
+pub const MAX_SCENARIO_BYTES: usize = 4 << 20;
+
+/// Most obstacles a scenario may hold: every sonar beam and camera ray
+/// tests each one it cannot rule out.
+pub const MAX_OBSTACLES: usize = 4096;
+
+/// Most triangles, and most vertices, over all mesh obstacles.
+pub const MAX_MESH_ELEMENTS: usize = 200_000;
+
+/// Most `[[faults]]` entries.
+pub const MAX_FAULTS: usize = 1024;
+
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / f64::from(1u32 << 20))
+}
+
 /// Longest simulated duration, s (a year).
 pub const MAX_DURATION_S: f64 = 365.0 * 86400.0;
 
@@ -1343,81 +1420,94 @@ pub fn table_at(text: &str, offset: Option<usize>) -> Option<String> {
 
 fn path_at(text: &str, offset: Option<usize>, with_key: bool) -> Option<String> {
     let offset = offset?.min(text.len());
-    let mut header = String::new();
-    let mut counts: HashMap<String, usize> = HashMap::new();
+    let mut walk = PathWalk::default();
     let mut pos = 0usize;
-    // Brackets a value left open (an array over several lines), and its key.
-    let mut depth = 0i32;
-    let mut open_key: Option<String> = None;
-    let under = |header: &str, k: String| {
-        if header.is_empty() {
-            k
-        } else {
-            format!("{header}.{k}")
-        }
-    };
     for line in text.split_inclusive('\n') {
         let end = pos + line.len();
-        let t = line.trim();
-        let on_line = offset >= pos && (offset < end || end == text.len());
-        if depth > 0 {
-            // A continuation of the open value: its key's line, not a header.
-            if on_line {
-                return if with_key {
-                    open_key.clone()
-                } else {
-                    (!header.is_empty()).then_some(header)
-                };
-            }
-            depth += bracket_delta(t);
-            pos = end;
-            continue;
-        }
-        if let Some(inner) = t.strip_prefix("[[").and_then(|r| r.split("]]").next()) {
-            let name = clean_key(inner);
-            let n = counts.entry(name.clone()).or_insert(0);
-            header = format!("{name}[{n}]");
-            *n += 1;
-            if on_line {
-                return Some(header);
-            }
-        } else if let Some(inner) = t.strip_prefix('[').and_then(|r| r.split(']').next()) {
-            header = clean_key(inner);
-            // `[vehicles.x]` under an array of tables belongs to its last element.
-            if let Some((first, rest)) = header.split_once('.') {
-                if let Some(n) = counts.get(first) {
-                    header = format!("{first}[{}].{rest}", n.saturating_sub(1));
-                }
-            }
-            if on_line {
-                return Some(header);
-            }
-        } else {
-            let kv = (!t.starts_with('#'))
-                .then(|| t.split_once('='))
-                .flatten()
-                .map(|(k, v)| (clean_key(k), v));
-            if on_line && with_key {
-                return match kv {
-                    Some((k, _)) if !k.is_empty() => Some(under(&header, k)),
-                    _ if header.is_empty() => None,
-                    _ => Some(header),
-                };
-            }
-            if let Some((k, v)) = kv {
-                let d = bracket_delta(v);
-                if d > 0 {
-                    depth = d;
-                    open_key = Some(under(&header, k));
-                }
-            }
-        }
-        if on_line {
-            break;
+        let answer = walk.line(line, with_key);
+        if offset >= pos && (offset < end || end == text.len()) {
+            return answer;
         }
         pos = end;
     }
-    (!header.is_empty()).then_some(header)
+    walk.table()
+}
+
+/// The table headers read so far, line by line, in one pass: what
+/// [`key_at`] and [`table_at`] name at each line's start.
+#[derive(Debug, Default)]
+struct PathWalk {
+    /// The current table (`vehicles[1]`, `camera`), or empty at the top level.
+    header: String,
+    /// Elements of each array of tables so far.
+    counts: HashMap<String, usize>,
+    /// Brackets a value left open (an array over several lines), and its key.
+    depth: i32,
+    open_key: Option<String>,
+}
+
+impl PathWalk {
+    /// The current table, if any.
+    fn table(&self) -> Option<String> {
+        (!self.header.is_empty()).then(|| self.header.clone())
+    }
+
+    fn under(&self, k: String) -> String {
+        if self.header.is_empty() {
+            k
+        } else {
+            format!("{}.{k}", self.header)
+        }
+    }
+
+    /// Reads the next line; returns the path at its start (the key with
+    /// `with_key`, else its table).
+    fn line(&mut self, line: &str, with_key: bool) -> Option<String> {
+        let t = line.trim();
+        if self.depth > 0 {
+            // A continuation of the open value: its key's line, not a header.
+            let answer = if with_key {
+                self.open_key.clone()
+            } else {
+                self.table()
+            };
+            self.depth += bracket_delta(t);
+            return answer;
+        }
+        if let Some(inner) = t.strip_prefix("[[").and_then(|r| r.split("]]").next()) {
+            let name = clean_key(inner);
+            let n = self.counts.entry(name.clone()).or_insert(0);
+            self.header = format!("{name}[{n}]");
+            *n += 1;
+            return Some(self.header.clone());
+        }
+        if let Some(inner) = t.strip_prefix('[').and_then(|r| r.split(']').next()) {
+            self.header = clean_key(inner);
+            // `[vehicles.x]` under an array of tables belongs to its last element.
+            if let Some((first, rest)) = self.header.split_once('.') {
+                if let Some(n) = self.counts.get(first) {
+                    self.header = format!("{first}[{}].{rest}", n.saturating_sub(1));
+                }
+            }
+            return Some(self.header.clone());
+        }
+        let kv = (!t.starts_with('#'))
+            .then(|| t.split_once('='))
+            .flatten()
+            .map(|(k, v)| (clean_key(k), v));
+        let answer = match (&kv, with_key) {
+            (Some((k, _)), true) if !k.is_empty() => Some(self.under(k.clone())),
+            _ => self.table(),
+        };
+        if let Some((k, v)) = kv {
+            let d = bracket_delta(v);
+            if d > 0 {
+                self.depth = d;
+                self.open_key = Some(self.under(k));
+            }
+        }
+        answer
+    }
 }
 
 /// Opening minus closing brackets of a TOML value's text, outside strings
@@ -1472,10 +1562,34 @@ impl Scenario {
     /// the errors of later checks in the same text).
     pub fn read_file(path: &std::path::Path) -> Result<(Self, String), ScenarioError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Read {
+        let read_error = |reason: String| ScenarioError::Read {
             path: file.clone(),
-            reason: e.to_string(),
-        })?;
+            reason,
+        };
+        // The size first, and never more than the limit read (a pipe or a
+        // growing file has no size to ask).
+        let f = std::fs::File::open(path).map_err(|e| read_error(e.to_string()))?;
+        let too_big = |n: u64| {
+            read_error(format!(
+                "it is {}, more than a scenario may be ({})",
+                mib(n),
+                mib(MAX_SCENARIO_BYTES as u64)
+            ))
+        };
+        if let Ok(m) = f.metadata() {
+            if m.is_file() && m.len() > MAX_SCENARIO_BYTES as u64 {
+                return Err(too_big(m.len()));
+            }
+        }
+        let mut text = String::new();
+        std::io::Read::read_to_string(
+            &mut std::io::Read::take(f, MAX_SCENARIO_BYTES as u64 + 1),
+            &mut text,
+        )
+        .map_err(|e| read_error(e.to_string()))?;
+        if text.len() > MAX_SCENARIO_BYTES {
+            return Err(too_big(text.len() as u64));
+        }
         let s = Self::from_toml(&text).map_err(|e| e.located(&file, &text))?;
         Ok((s, text))
     }
