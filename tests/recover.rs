@@ -251,3 +251,80 @@ fn corrupt_files_give_a_clear_error_never_a_panic() {
         assert!(!tmp.path().join("out.mcap.partial").exists());
     }
 }
+
+/// A tmpfs of `size` mounted on `dir` for one test, unmounted when dropped
+/// (also on failure).
+struct SmallDisk(PathBuf);
+
+impl SmallDisk {
+    fn mount(dir: &Path, size: &str) -> Self {
+        std::fs::create_dir_all(dir).unwrap();
+        let status = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+            .arg(dir)
+            .status()
+            .unwrap();
+        assert!(
+            status.success(),
+            "mounting a small tmpfs needs root (as the hosts tests do)"
+        );
+        Self(dir.to_path_buf())
+    }
+}
+
+impl Drop for SmallDisk {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount")
+            .arg("-l")
+            .arg(&self.0)
+            .status();
+    }
+}
+
+#[test]
+fn a_run_that_fills_its_disk_stops_naming_the_disk_and_its_recording_still_reads() {
+    let tmp = tempfile::tempdir().unwrap();
+    let disk = SmallDisk::mount(&tmp.path().join("small"), "3m");
+    let out = disk.0.join("run");
+    // The paper scenario records about 5 MB: it cannot fit.
+    let o = run_shoal(&["run", "--quiet", "--out", out.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "the run fitted on 3 MiB");
+    assert!(
+        stderr.contains("the output disk is full") && stderr.contains(out.to_str().unwrap()),
+        "{stderr}"
+    );
+    let run: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+    shoal_tests::assert_domain_clean(run["run_id"].as_str().unwrap());
+
+    // What was written reads: a whole copy elsewhere, and a summary.
+    let rec = out.join("recording.mcap");
+    let copy = tmp.path().join("copy.mcap");
+    ok(
+        &run_shoal(&[
+            "recover",
+            rec.to_str().unwrap(),
+            "--out",
+            copy.to_str().unwrap(),
+        ]),
+        "recover",
+    );
+    let n = Recording::open(&copy)
+        .unwrap()
+        .topic_messages("/L/truth")
+        .count();
+    assert!(n > 100, "{n} truths recovered");
+    let summary_dir = tmp.path().join("summary");
+    ok(
+        &run_shoal(&[
+            "summarize",
+            rec.to_str().unwrap(),
+            "--out",
+            summary_dir.to_str().unwrap(),
+        ]),
+        "summarize",
+    );
+    let s = shoal_tests::summary(&summary_dir);
+    assert!(s["sim_time_s"].as_f64().unwrap() > 10.0, "{s}");
+}

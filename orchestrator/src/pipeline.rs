@@ -98,7 +98,10 @@ pub fn run_and_summarize(
                     Err(err) => tracing::warn!("no summary of the part that ran: {err:#}"),
                 }
             }
-            return Err(e);
+            return Err(match disk_full(out) {
+                Some(why) => e.context(why),
+                None => e,
+            });
         }
     };
     let rec = recordings::Recording::open(&outcome.recording)?;
@@ -110,6 +113,26 @@ pub fn run_and_summarize(
         summary,
         scenario,
         recording: rec,
+    })
+}
+
+/// Free space below which a run that failed is taken to have filled its
+/// output disk, bytes (less than the recorder's smallest chunk).
+const DISK_FULL_BYTES: u64 = 256 * 1024;
+
+/// Why a failed run failed, when its output disk is full: the disk named,
+/// and what can still be read.
+fn disk_full(out: &Path) -> Option<String> {
+    let (free, _) = crate::launch::os::statvfs_free(out.to_str()?);
+    let free = free?;
+    (free < DISK_FULL_BYTES).then(|| {
+        let rec = out.join("recording.mcap");
+        format!(
+            "the output disk is full ({} has {free} bytes free): the recording stops at its last complete chunk; `shoal recover {}` writes a whole copy elsewhere and `shoal summarize {}` reads it",
+            out.display(),
+            rec.display(),
+            rec.display()
+        )
     })
 }
 
