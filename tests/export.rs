@@ -259,10 +259,10 @@ fn hex(bytes: &[u8]) -> String {
 fn a_live_run_serves_what_it_records_to_a_foxglove_protocol_client_and_a_stalled_client_does_not_stall_it(
 ) {
     let tmp = tempfile::tempdir().unwrap();
-    let scenario = write_scenario(tmp.path(), "live.toml", &small_scenario("live", 12.0));
+    let scenario = write_scenario(tmp.path(), "live.toml", &small_scenario("live", 16.0));
     let run_dir = tmp.path().join("run");
     let mut child = shoal()
-        .args(["run", "--quiet", "--live", "127.0.0.1:0", "--pace", "3"])
+        .args(["run", "--quiet", "--live", "127.0.0.1:0", "--pace", "2"])
         .arg(&scenario)
         .arg("--out")
         .arg(&run_dir)
@@ -276,7 +276,7 @@ fn a_live_run_serves_what_it_records_to_a_foxglove_protocol_client_and_a_stalled
     // longer than the run lasts.
     let stalled = python()
         .arg(&client)
-        .args([url.as_str(), "--stall", "6"])
+        .args([url.as_str(), "--stall", "10"])
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()

@@ -374,7 +374,7 @@ fn eventually(timeout: Duration, mut f: impl FnMut() -> bool) -> bool {
 #[test]
 fn shoal_top_shows_every_process_of_a_realtime_run_and_updates_under_a_terminal() {
     let tmp = tempfile::tempdir().unwrap();
-    let scenario = write_scenario(tmp.path(), "top.toml", &small_scenario("top", 20.0));
+    let scenario = write_scenario(tmp.path(), "top.toml", &small_scenario("top", 40.0));
     let out = tmp.path().join("top");
     let (mut run, run_id) = start_run(&scenario, &out, &["--mode", "realtime"], 10);
 
