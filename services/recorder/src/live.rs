@@ -5,8 +5,8 @@
 //! the same `ros2msg` schema, and each message sent is the very CDR body the
 //! recording stores (no second encoding): whatever opens the recording
 //! decodes the live stream too. The server is the `foxglove` crate's (the
-//! Foxglove WebSocket protocol, `foxglove.websocket.v1`), on its own
-//! threads: the recorder's step only hands a message to the server's
+//! Foxglove WebSocket protocol, served under the subprotocol name
+//! `foxglove.sdk.v1`), on its own threads: the recorder's step only hands a message to the server's
 //! per-client queues and never waits for a socket.
 //!
 //! Beside the recorded channels, the view of `shoal export --foxglove`
@@ -18,9 +18,10 @@
 //! simulated second for clients that join late.
 //!
 //! Cost: a channel no client subscribes to costs one atomic load per
-//! message, and with no client connected no scene is built. A slow client never stalls the run: when its queue (the
-//! backlog, [`BACKLOG`] messages) is full, the server drops the oldest
-//! message for it; the client sees the gap in each sample's `header.seq`.
+//! message, and with no client connected no scene is built. A slow client
+//! never stalls the run: when its queue (the backlog, [`BACKLOG`] messages)
+//! is full, the server drops the oldest message for it; the client sees the
+//! gap in each sample's `header.seq`.
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
