@@ -57,6 +57,8 @@ pub struct Live {
     routes: HashMap<u16, (String, Channel)>,
     /// Simulated time the static scene is due again, ns.
     static_due_ns: u64,
+    /// A client was connected when the current batch began.
+    watched: bool,
 }
 
 /// The scene's messages, each on a live channel of its Foxglove schema
@@ -148,6 +150,7 @@ impl Live {
             scene,
             routes: HashMap::new(),
             static_due_ns: 0,
+            watched: false,
         })
     }
 
@@ -170,16 +173,17 @@ impl Live {
         Ok(())
     }
 
-    /// True while a client is connected.
-    fn watched(&self) -> bool {
-        self.server.as_ref().is_some_and(|s| s.client_count() > 0)
+    /// Before a batch: whether a client is connected, asked once for the
+    /// whole batch (the scene is built only then).
+    pub fn batch_start(&mut self) {
+        self.watched = self.server.as_ref().is_some_and(|s| s.client_count() > 0);
     }
 
     /// Sends one recorded message (its CDR body) of channel `id` to the
     /// clients subscribed to it, stamped with its simulated time.
     pub fn log(&mut self, id: u16, sim_time_ns: u64, body: &[u8]) {
         if let Some((vehicle, ch)) = self.routes.get(&id) {
-            if self.watched() {
+            if self.watched {
                 if let Err(e) = self.scene.message(vehicle, *ch, sim_time_ns, body) {
                     tracing::warn!("live scene: {e:#}");
                 }
@@ -201,7 +205,7 @@ impl Live {
     /// After a batch up to `sim_time_ns`: the batch's transforms out, the
     /// static scene again when due, old poses forgotten.
     pub fn batch_done(&mut self, sim_time_ns: u64) {
-        if !self.watched() {
+        if !self.watched {
             return;
         }
         let result = self.scene.flush_tf().and_then(|()| {

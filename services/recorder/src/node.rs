@@ -345,6 +345,9 @@ impl RecorderTask {
         let Some(writer) = self.writer.as_mut() else {
             return Ok(());
         };
+        if let Some(live) = self.live.as_mut() {
+            live.batch_start();
+        }
         for p in &self.batch {
             let channel = self.taps[p.order].channel();
             writer

@@ -955,16 +955,7 @@ impl Scenario {
         if self.vehicles.is_empty() {
             return Err(invalid("vehicles", "at least one vehicle is needed"));
         }
-        if self.vehicles.len() > ipc_types_max_vehicles() {
-            return Err(invalid(
-                "vehicles",
-                format!(
-                    "{} vehicles, at most {} fit in the world snapshot",
-                    self.vehicles.len(),
-                    ipc_types_max_vehicles()
-                ),
-            ));
-        }
+        // Their number is checked first, in `validate_sizes`.
         let mut index: HashMap<&str, usize> = HashMap::new();
         for (i, v) in self.vehicles.iter().enumerate() {
             let key = format!("vehicles[{i}].name");
