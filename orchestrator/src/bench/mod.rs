@@ -5,5 +5,6 @@ pub mod hosts;
 pub mod ipc;
 pub mod run;
 pub mod scale;
+pub mod soak;
 pub mod step;
 pub mod vision;

@@ -134,6 +134,10 @@ enum BenchCmd {
     /// tick over 1, 2 and 4 hosts, a large group over several hosts, and
     /// 1,000 vehicles over 16 hosts on paper.
     Hosts(bench::hosts::HostsBenchCmd),
+    /// A long realtime run (25 vehicles for an hour by default) watched
+    /// from outside: memory, open descriptors and shared-memory files over
+    /// time, and how much each grew after the first minute.
+    Soak(bench::soak::SoakCmd),
     /// One end of `bench hosts`' hop, run inside a host (not by hand).
     #[command(hide = true)]
     HopPeer(bench::hosts::HopPeerCmd),
@@ -177,6 +181,7 @@ pub fn main() -> ExitCode {
         Cmd::Bench(BenchCmd::Step(cmd)) => bench::step::run(cmd),
         Cmd::Bench(BenchCmd::Vision(cmd)) => bench::vision::run(cmd),
         Cmd::Bench(BenchCmd::Hosts(cmd)) => bench::hosts::run(cmd),
+        Cmd::Bench(BenchCmd::Soak(cmd)) => bench::soak::run(cmd),
         Cmd::Bench(BenchCmd::HopPeer(cmd)) => bench::hosts::hop_peer(cmd),
     };
     match result {
