@@ -49,7 +49,13 @@ fn net_with_agents(dir: &Path, k: usize) -> (TestNet, PathBuf) {
 
 /// `shoal run --quiet SCENARIO --hosts HOSTS --out OUT` in the
 /// coordinator's namespace, started (output piped).
-fn spawn_over_hosts(net: &TestNet, scenario: &Path, hosts: &Path, out: &Path) -> Child {
+fn spawn_over_hosts(
+    net: &TestNet,
+    scenario: &Path,
+    hosts: &Path,
+    out: &Path,
+    extra: &[&str],
+) -> Child {
     net.in_ctl(&bin_dir().join("shoal"))
         .args([
             "run",
@@ -60,6 +66,7 @@ fn spawn_over_hosts(net: &TestNet, scenario: &Path, hosts: &Path, out: &Path) ->
             "--out",
             out.to_str().unwrap(),
         ])
+        .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -68,9 +75,16 @@ fn spawn_over_hosts(net: &TestNet, scenario: &Path, hosts: &Path, out: &Path) ->
 
 /// Runs `scenario` on one host into `dir/one`, then over the `k` hosts of a
 /// fresh [`TestNet`] into `dir/hosts`, calling `during` once the run over
-/// hosts is under way; checks both recordings hold the same messages, the
-/// summaries agree, and every host is left clean.
-fn one_host_and_k_hosts(dir: &Path, scenario: &Path, k: usize, during: impl FnOnce(&TestNet)) {
+/// hosts is under way (started with `extra` arguments); checks both
+/// recordings hold the same messages, the summaries agree, and every host
+/// is left clean.
+fn one_host_and_k_hosts(
+    dir: &Path,
+    scenario: &Path,
+    k: usize,
+    extra: &[&str],
+    during: impl FnOnce(&TestNet),
+) {
     let one = dir.join("one");
     run_shoal_ok(&[
         "run",
@@ -81,7 +95,7 @@ fn one_host_and_k_hosts(dir: &Path, scenario: &Path, k: usize, during: impl FnOn
     ]);
     let (net, hosts_toml) = net_with_agents(dir, k);
     let spread = dir.join("hosts");
-    let mut child = spawn_over_hosts(&net, scenario, &hosts_toml, &spread);
+    let mut child = spawn_over_hosts(&net, scenario, &hosts_toml, &spread, extra);
     wait_child_run_json(&mut child, &spread, Duration::from_secs(30));
     during(&net);
     let o = child.wait_with_output().unwrap();
@@ -138,7 +152,144 @@ fn one_host_and_k_hosts(dir: &Path, scenario: &Path, k: usize, during: impl FnOn
 fn the_paper_scenario_over_two_hosts_gives_the_one_host_messages() {
     let tmp = tempfile::tempdir().unwrap();
     let paper = repo_root().join("scenarios/paper.toml");
-    one_host_and_k_hosts(tmp.path(), &paper, 2, |_| {});
+    one_host_and_k_hosts(tmp.path(), &paper, 2, &[], |_| {});
+}
+
+/// `tests/python/outside_client.py` (PyPI `eclipse-zenoh`) run from host
+/// `from`'s namespace against `endpoint` with `args`; its JSON report.
+fn outside_client(net: &TestNet, from: usize, endpoint: &str, args: &[&str]) -> serde_json::Value {
+    let py = std::env::var("SHOAL_PYTHON").unwrap_or_else(|_| "python3".into());
+    let o = net
+        .in_host(from, &py)
+        .arg(repo_root().join("tests/python/outside_client.py"))
+        .args(["--connect", endpoint])
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "outside_client.py: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "outside_client.py printed no report ({e}): {}",
+            String::from_utf8_lossy(&o.stdout)
+        )
+    })
+}
+
+#[test]
+fn an_outside_client_can_neither_join_nor_drive_a_host_and_the_run_keeps_its_messages() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().to_path_buf();
+    let paper = repo_root().join("scenarios/paper.toml");
+    // Certificates an intruder might hold: another deployment's, and one
+    // of this deployment's that has expired.
+    let foreign = dir.join("foreign");
+    run_shoal_ok(&["certs", "--out", foreign.to_str().unwrap(), "--host", "h2"]);
+    let expired = dir.join("expired");
+    let made = |net: &TestNet| {
+        std::fs::create_dir_all(&expired).unwrap();
+        for f in ["ca.pem", "ca.key"] {
+            std::fs::copy(net.certs_dir().join(f), expired.join(f)).unwrap();
+        }
+        run_shoal_ok(&[
+            "certs",
+            "--out",
+            expired.to_str().unwrap(),
+            "--host",
+            "h2",
+            "--valid-from",
+            "-40",
+            "--days",
+            "30",
+        ]);
+    };
+    let spread = dir.join("hosts");
+    let log_dir = dir.clone();
+    // Paced (200 s simulated in about 10 s) so that every attempt falls
+    // within the run.
+    one_host_and_k_hosts(&dir, &paper, 2, &["--pace", "20"], |net| {
+        made(net);
+        let run_id = wait_run_json(&spread, Duration::from_secs(5))["run_id"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        let certs = net.certs().unwrap().to_path_buf();
+        let path = |d: &Path, f: &str| d.join(f).display().to_string();
+        let ca = path(&certs, "ca.pem");
+        let h1 = net.endpoint(0);
+        // A certificate of this deployment, another host's: the session
+        // opens (TLS accepts it), but access control refuses it everything:
+        // it reads nothing of the run, and its aborts, clock ticks and
+        // world samples go nowhere (the run's messages stay the one-host
+        // run's, checked after).
+        let (cert, key) = (path(&certs, "h2.pem"), path(&certs, "h2.key"));
+        let r = outside_client(
+            net,
+            1,
+            &h1,
+            &[
+                "--ca",
+                &ca,
+                "--cert",
+                &cert,
+                "--key",
+                &key,
+                "--run",
+                &run_id,
+                "--seconds",
+                "3",
+            ],
+        );
+        assert_eq!(r["opened"], true, "{r}");
+        assert_eq!(r["published"].as_array().unwrap().len(), 3, "{r}");
+        assert_eq!(
+            r["received"], 0,
+            "another host's certificate read the run: {r}"
+        );
+        assert!(
+            !spread.join("summary.json").exists(),
+            "the run ended before the attempt did"
+        );
+        // No certificate, another deployment's, an expired one, plain TCP:
+        // no session at all, and the agent names why.
+        let (fc, fk) = (path(&foreign, "h2.pem"), path(&foreign, "h2.key"));
+        let (ec, ek) = (path(&expired, "h2.pem"), path(&expired, "h2.key"));
+        let cases = [
+            (vec!["--ca", &ca], "peer sent no certificates"),
+            (
+                vec!["--ca", &ca, "--cert", &fc, "--key", &fk],
+                "UnknownIssuer",
+            ),
+            (
+                vec!["--ca", &ca, "--cert", &ec, "--key", &ek],
+                "certificate expired",
+            ),
+        ];
+        for (args, named) in cases {
+            let mut args = args.clone();
+            args.extend(["--run", &run_id, "--seconds", "1"]);
+            let r = outside_client(net, 1, &h1, &args);
+            assert_eq!(r["opened"], false, "{named}: {r}");
+            let log = std::fs::read_to_string(log_dir.join("h1.agent.log")).unwrap();
+            assert!(
+                log.contains(named),
+                "the agent does not name `{named}`:\n{log}"
+            );
+        }
+        let tcp = net.endpoint_with(0, "tcp");
+        let r = outside_client(net, 1, &tcp, &["--seconds", "1"]);
+        assert_eq!(r["opened"], false, "plain TCP: {r}");
+    });
+    // The agents announced TLS and whom they answer.
+    let log = std::fs::read_to_string(dir.join("h1.agent.log")).unwrap();
+    assert!(
+        log.contains("(TLS, mutual authentication") && log.contains("answers only coordinator"),
+        "{log}"
+    );
+    assert!(!log.contains("aborted"), "{log}");
 }
 
 #[test]
@@ -148,7 +299,7 @@ fn twenty_five_vehicles_over_four_hosts_give_the_one_host_messages() {
     let mut text = String::from_utf8(o.stdout).unwrap();
     text = text.replacen("duration_s = ", "duration_s = 40.0\n# was: ", 1);
     let sc = write_scenario(tmp.path(), "g25.toml", &text);
-    one_host_and_k_hosts(tmp.path(), &sc, 4, |_| {});
+    one_host_and_k_hosts(tmp.path(), &sc, 4, &[], |_| {});
 }
 
 #[test]
@@ -158,7 +309,7 @@ fn a_killed_agent_stops_the_run_on_every_host_with_the_cause_named() {
     let (mut net, hosts_toml) = net_with_agents(dir, 2);
     let sc = write_scenario(dir, "long.toml", &small_scenario("long", 600.0));
     let out = dir.join("run");
-    let mut child = spawn_over_hosts(&net, &sc, &hosts_toml, &out);
+    let mut child = spawn_over_hosts(&net, &sc, &hosts_toml, &out, &[]);
     // Once the run is under way (its id is written, the hosts started).
     wait_child_run_json(&mut child, &out, Duration::from_secs(30));
     std::thread::sleep(Duration::from_secs(3));
@@ -182,7 +333,7 @@ fn a_link_cut_for_three_seconds_pauses_the_run_and_it_ends_with_the_same_message
     let tmp = tempfile::tempdir().unwrap();
     let paper = repo_root().join("scenarios/paper.toml");
     let spread = tmp.path().join("hosts");
-    one_host_and_k_hosts(tmp.path(), &paper, 2, |net| {
+    one_host_and_k_hosts(tmp.path(), &paper, 2, &[], |net| {
         std::thread::sleep(Duration::from_millis(1500));
         net.set_link(1, false).unwrap();
         std::thread::sleep(Duration::from_secs(3));
@@ -202,7 +353,7 @@ fn a_link_cut_past_the_lease_stops_every_host_cleanly_with_the_cause_named() {
     let (net, hosts_toml) = net_with_agents(dir, 2);
     let sc = write_scenario(dir, "long.toml", &small_scenario("long", 600.0));
     let out = dir.join("run");
-    let mut child = spawn_over_hosts(&net, &sc, &hosts_toml, &out);
+    let mut child = spawn_over_hosts(&net, &sc, &hosts_toml, &out, &[]);
     wait_child_run_json(&mut child, &out, Duration::from_secs(30));
     std::thread::sleep(Duration::from_secs(2));
     net.set_link(1, false).unwrap();
@@ -354,4 +505,180 @@ fn a_realtime_run_over_two_hosts_starts_every_host_at_one_epoch_and_the_agents_s
         serde_json::from_str(&std::fs::read_to_string(dir.join("rt3/hosts.json")).unwrap())
             .unwrap();
     assert_eq!(rt3["hosts"].as_array().map(Vec::len), Some(3), "{rt3}");
+}
+
+/// A free UDP port on loopback (for an agent's QUIC listener).
+fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+#[test]
+fn plain_tcp_only_when_asked_and_bad_certificates_named_before_anything_runs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let certs = dir.join("certs");
+    let c = certs.to_str().unwrap();
+    run_shoal_ok(&["certs", "--out", c, "--host", "h1=127.0.0.1"]);
+    // An agent on plain TCP without --insecure: refused, and why.
+    let o = run_shoal(&[
+        "host",
+        "--listen",
+        "tcp/127.0.0.1:1",
+        "--name",
+        "h1",
+        "--once",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("plain TCP") && err.contains("--insecure"),
+        "{err}"
+    );
+    // Zenoh's tls/ link is refused with its reason.
+    let o = run_shoal(&[
+        "host",
+        "--listen",
+        "tls/127.0.0.1:1",
+        "--name",
+        "h1",
+        "--certs",
+        c,
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("2557"), "{err}");
+    // An expired certificate: the agent does not start, and names it.
+    let old = dir.join("old");
+    std::fs::create_dir_all(&old).unwrap();
+    for f in ["ca.pem", "ca.key"] {
+        std::fs::copy(certs.join(f), old.join(f)).unwrap();
+    }
+    run_shoal_ok(&[
+        "certs",
+        "--out",
+        old.to_str().unwrap(),
+        "--host",
+        "h1",
+        "--valid-from",
+        "-40",
+        "--days",
+        "30",
+    ]);
+    let o = run_shoal(&[
+        "host",
+        "--listen",
+        "quic/127.0.0.1:1",
+        "--name",
+        "h1",
+        "--certs",
+        old.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("expired") && err.contains("h1.pem"),
+        "{err}"
+    );
+    // A hosts file on plain TCP without --insecure: refused before any run.
+    let sc = write_scenario(dir, "s.toml", &small_scenario("s", 5.0));
+    let tcp = write_scenario(
+        dir,
+        "tcp.toml",
+        "[[host]]\nname = \"h1\"\nendpoint = \"tcp/127.0.0.1:1\"\n",
+    );
+    let o = run_shoal(&[
+        "run",
+        sc.to_str().unwrap(),
+        "--hosts",
+        tcp.to_str().unwrap(),
+        "--out",
+        dir.join("refused").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("plain TCP") && err.contains("--insecure"),
+        "{err}"
+    );
+    // QUIC without certificates for the coordinator: refused, and why.
+    let port = free_udp_port();
+    let endpoint = format!("quic/127.0.0.1:{port}");
+    let bare = write_scenario(
+        dir,
+        "bare.toml",
+        &format!("[[host]]\nname = \"h1\"\nendpoint = \"{endpoint}\"\n"),
+    );
+    let o = run_shoal(&[
+        "run",
+        sc.to_str().unwrap(),
+        "--hosts",
+        bare.to_str().unwrap(),
+        "--out",
+        dir.join("refused").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("[tls]"), "{err}");
+    // A coordinator of another deployment: the agent refuses it (its log
+    // names the certificate's fault), and the coordinator's error says
+    // what its own handshake with the agent found.
+    let mut agent = shoal()
+        .args([
+            "host", "--listen", &endpoint, "--name", "h1", "--certs", c, "--once",
+        ])
+        .args(["--work", dir.join("work").to_str().unwrap()])
+        .stderr(std::fs::File::create(dir.join("agent.log")).unwrap())
+        .spawn()
+        .unwrap();
+    let foreign = dir.join("foreign");
+    run_shoal_ok(&[
+        "certs",
+        "--out",
+        foreign.to_str().unwrap(),
+        "--host",
+        "h1=127.0.0.1",
+    ]);
+    let hosts = write_scenario(
+        dir,
+        "hosts.toml",
+        &format!(
+            "[[host]]\nname = \"h1\"\nendpoint = \"{endpoint}\"\n\n[tls]\ncerts = \"{}\"\n",
+            foreign.display()
+        ),
+    );
+    let o = run_shoal(&[
+        "run",
+        sc.to_str().unwrap(),
+        "--hosts",
+        hosts.to_str().unwrap(),
+        "--out",
+        dir.join("refused").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("not signed by our CA"),
+        "{err}"
+    );
+    // The same agent serves a coordinator of its own deployment.
+    let ours = write_scenario(
+        dir,
+        "ours.toml",
+        &format!("[[host]]\nname = \"h1\"\nendpoint = \"{endpoint}\"\n\n[tls]\ncerts = \"{c}\"\n"),
+    );
+    let out = dir.join("run");
+    run_shoal_ok(&[
+        "run",
+        sc.to_str().unwrap(),
+        "--hosts",
+        ours.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(agent.wait().unwrap().success());
+    let log = std::fs::read_to_string(dir.join("agent.log")).unwrap();
+    assert!(log.contains("UnknownIssuer"), "{log}");
+    assert!(
+        log.contains("a run starts") && log.contains("coordinator=coordinator"),
+        "{log}"
+    );
 }

@@ -35,6 +35,7 @@ use super::run::fmt_num;
 use crate::hosts::bridge::{Bridge, Inbound};
 use crate::hosts::netns::TestNet;
 use crate::hosts::placement::{world_wire_bytes, Crossing};
+use crate::hosts::tls::{Identity, Security};
 use crate::hosts::wire;
 use crate::launch;
 
@@ -100,6 +101,47 @@ pub struct HopPeerCmd {
     /// Round trips to time (ping), after 200 not timed.
     #[arg(long, default_value_t = 1000)]
     rounds: usize,
+    /// TLS with these certificates (as `shoal certs` writes them) and the
+    /// access control of a run; plain TCP without.
+    #[arg(long, value_name = "DIR")]
+    certs: Option<PathBuf>,
+    /// This peer's certificate name (with --certs).
+    #[arg(long, default_value = crate::hosts::tls::DEFAULT_COORDINATOR)]
+    name: String,
+}
+
+/// The hop's keys under access control: the two hosts (`h1`, `h2`) may do
+/// anything on the bench's keys at the router; a peer takes them from the
+/// router only, as an agent does from its coordinator.
+fn hop_security(cmd: &HopPeerCmd) -> (Security, Option<Value>) {
+    let Some(dir) = &cmd.certs else {
+        return (Security::Insecure, None);
+    };
+    let id = Identity::in_dir(dir, &cmd.name);
+    let acl = if cmd.role == HopRole::Router {
+        let all = [
+            "put",
+            "delete",
+            "declare_subscriber",
+            "query",
+            "reply",
+            "declare_queryable",
+            "liveliness_token",
+            "liveliness_query",
+            "declare_liveliness_subscriber",
+        ];
+        json!({
+            "enabled": true,
+            "default_permission": "deny",
+            "rules": [{ "id": "hop", "messages": all, "flows": ["ingress", "egress"],
+                        "permission": "allow", "key_exprs": ["shoal/benchhop/**"] }],
+            "subjects": [{ "id": "hosts", "cert_common_names": ["h1", "h2"] }],
+            "policies": [{ "rules": ["hop"], "subjects": ["hosts"] }],
+        })
+    } else {
+        crate::hosts::tls::agent_acl(&[crate::hosts::tls::DEFAULT_COORDINATOR.to_string()])
+    };
+    (Security::Tls(id), Some(acl))
 }
 
 /// A hop benchmark process's role.
@@ -129,8 +171,10 @@ const PONG: &str = "shoal/benchhop/pong/truth";
 /// Runs one end of the hop benchmark.
 pub fn hop_peer(cmd: HopPeerCmd) -> anyhow::Result<()> {
     let _ = launch::termination_requested();
+    let (security, acl) = hop_security(&cmd);
+    let config = || wire::router_config(&cmd.listen, &cmd.connect, &security, acl.as_ref());
     if cmd.role == HopRole::Router {
-        let _session = zenoh::open(wire::router_config(&cmd.listen, &cmd.connect)?)
+        let _session = zenoh::open(config()?)
             .wait()
             .map_err(|e| anyhow::anyhow!("zenoh: {e}"))?;
         while launch::termination_requested().is_none() {
@@ -139,7 +183,7 @@ pub fn hop_peer(cmd: HopPeerCmd) -> anyhow::Result<()> {
         return Ok(());
     }
     anyhow::ensure!(cmd.size >= 16, "--size must be at least 16 bytes");
-    let session = zenoh::open(wire::router_config(&cmd.listen, &cmd.connect)?)
+    let session = zenoh::open(config()?)
         .wait()
         .map_err(|e| anyhow::anyhow!("zenoh: {e}"))?;
     if cmd.size <= std::mem::size_of::<ipc_types::Truth>() {
@@ -411,33 +455,51 @@ fn stop(mut child: Child) {
     let _ = child.wait();
 }
 
-/// One ping-pong measurement of `mode` (`direct`: no router) with `size`
-/// bytes; returns the one-way latencies, ns.
+/// One ping-pong measurement of `mode` (`direct`: no router; `tls`: TLS
+/// and access control, else plain TCP) with `size` bytes; returns the
+/// one-way latencies, ns.
+#[allow(clippy::too_many_arguments)]
 fn measure_hop(
     net: &TestNet,
     bin: &Path,
     dir: &Path,
     mode: HopMode,
     direct: bool,
+    tls: bool,
     size: usize,
     rounds: usize,
 ) -> anyhow::Result<Vec<f64>> {
-    let (e1, e2) = (net.endpoint(0), net.endpoint(1));
+    let scheme = if tls {
+        crate::hosts::tls::SECURE_SCHEME
+    } else {
+        "tcp"
+    };
+    let (e1, e2) = (net.endpoint_with(0, scheme), net.endpoint_with(1, scheme));
+    let ctl_certs = net.certs_dir().display().to_string();
+    let certs = |args: &mut Vec<&str>, dir: &'static str, name: &'static str| {
+        if tls {
+            args.extend(["--certs", dir, "--name", name]);
+        }
+    };
+    let mut router_args = vec![
+        "bench",
+        "hop-peer",
+        "--role",
+        "router",
+        "--connect",
+        e1.as_str(),
+        "--connect",
+        e2.as_str(),
+    ];
+    if tls {
+        router_args.extend(["--certs", ctl_certs.as_str()]);
+    }
     let router = if direct {
         None
     } else {
         Some(
             net.in_ctl(&bin.join("shoal"))
-                .args([
-                    "bench",
-                    "hop-peer",
-                    "--role",
-                    "router",
-                    "--connect",
-                    &e1,
-                    "--connect",
-                    &e2,
-                ])
+                .args(&router_args)
                 .stdout(Stdio::null())
                 .stderr(Stdio::null())
                 .spawn()
@@ -450,15 +512,11 @@ fn measure_hop(
     };
     let size_s = size.to_string();
     let rounds_s = rounds.to_string();
-    let echo = net.spawn_in_host(
-        1,
-        bin,
-        &[
-            "bench", "hop-peer", "--role", "echo", "--mode", mode_s, "--size", &size_s, "--listen",
-            &e2,
-        ],
-        &dir.join("echo.log"),
-    )?;
+    let mut echo_args = vec![
+        "bench", "hop-peer", "--role", "echo", "--mode", mode_s, "--size", &size_s, "--listen", &e2,
+    ];
+    certs(&mut echo_args, crate::hosts::netns::CERTS_MOUNT, "h2");
+    let echo = net.spawn_in_host(1, bin, &echo_args, &dir.join("echo.log"))?;
     let ping_log = dir.join("ping.log");
     let mut args = vec![
         "bench", "hop-peer", "--role", "ping", "--mode", mode_s, "--size", &size_s, "--listen",
@@ -467,6 +525,7 @@ fn measure_hop(
     if direct {
         args.extend(["--connect", e2.as_str()]);
     }
+    certs(&mut args, crate::hosts::netns::CERTS_MOUNT, "h1");
     let mut ping = net.spawn_in_host(0, bin, &args, &ping_log)?;
     let status = ping.wait()?;
     stop(echo);
@@ -602,10 +661,13 @@ pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
     );
     let hop_dir = out.join("hop");
     std::fs::create_dir_all(&hop_dir)?;
+    // Plain TCP (--insecure) first, then what a run uses: QUIC (TLS 1.3)
+    // with mutual authentication and access control.
     let modes = [
-        ("zenoh, via router", HopMode::Raw, false),
-        ("shoal, via router", HopMode::Shoal, false),
-        ("zenoh, direct link", HopMode::Raw, true),
+        ("zenoh, via router", HopMode::Raw, false, false),
+        ("shoal, via router", HopMode::Shoal, false, false),
+        ("zenoh, direct link", HopMode::Raw, true, false),
+        ("shoal, via router, QUIC", HopMode::Shoal, false, true),
     ];
     let mut ratios_out = Vec::new();
     for size in [232usize, world] {
@@ -615,9 +677,11 @@ pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
         let alternations = cmd.alternations.max(1);
         // Shoal's p50 over raw Zenoh's, per alternation (side by side).
         let mut ratios = Vec::with_capacity(alternations);
+        // Shoal over TLS against shoal over TCP, per alternation.
+        let mut tls_ratios = Vec::with_capacity(alternations);
         for _ in 0..alternations {
-            let mut p50_here = [f64::NAN; 2];
-            for (i, (_, mode, direct)) in modes.iter().enumerate() {
+            let mut p50_here = [f64::NAN; 4];
+            for (i, (_, mode, direct, tls)) in modes.iter().enumerate() {
                 stop_if_asked()?;
                 let mut v = measure_hop(
                     &net,
@@ -625,18 +689,18 @@ pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
                     &hop_dir,
                     *mode,
                     *direct,
+                    *tls,
                     size,
                     (cmd.rounds / alternations).max(1),
                 )?;
                 all[i].extend_from_slice(&v);
-                if i < 2 {
-                    p50_here[i] = pct_us(&mut v, 0.5);
-                }
+                p50_here[i] = pct_us(&mut v, 0.5);
             }
             ratios.push(p50_here[1] / p50_here[0]);
+            tls_ratios.push(p50_here[3] / p50_here[1]);
         }
         let mut p50 = Vec::new();
-        for (i, (name, _, _)) in modes.iter().enumerate() {
+        for (i, (name, _, _, _)) in modes.iter().enumerate() {
             let v = &mut all[i];
             let mean = v.iter().sum::<f64>() / v.len().max(1) as f64 / 1e3;
             let (a, b) = (pct_us(v, 0.5), pct_us(v, 0.99));
@@ -660,7 +724,17 @@ pub fn run(cmd: HostsBenchCmd) -> anyhow::Result<()> {
             fmt_num(ratios.first().copied().unwrap_or(f64::NAN)),
             fmt_num(ratios.last().copied().unwrap_or(f64::NAN)),
         );
-        ratios_out.push(json!({ "bytes": size, "pooled_p50_ratio": pooled, "median_ratio": median, "ratios": ratios }));
+        let tls_pooled = p50[3] / p50[1];
+        let tls_median = pct_us(&mut tls_ratios, 0.5) * 1e3;
+        println!(
+            "  {size:>8}  shoal QUIC+TLS / shoal TCP (goal <= 1.15): {} (p50 of all), median of the {alternations} side-by-side ratios {} (range {} - {})",
+            fmt_num(tls_pooled),
+            fmt_num(tls_median),
+            fmt_num(tls_ratios.first().copied().unwrap_or(f64::NAN)),
+            fmt_num(tls_ratios.last().copied().unwrap_or(f64::NAN)),
+        );
+        ratios_out.push(json!({ "bytes": size, "pooled_p50_ratio": pooled, "median_ratio": median, "ratios": ratios,
+            "tls_pooled_p50_ratio": tls_pooled, "tls_median_ratio": tls_median, "tls_ratios": tls_ratios }));
     }
     report["hop_ratio"] = json!(ratios_out);
     report["hop"] = json!(hops);

@@ -5,6 +5,7 @@
 //! and its tables, and this file only names them.
 
 mod campaign;
+mod certs;
 mod check;
 mod compare;
 mod export;
@@ -106,6 +107,9 @@ enum Cmd {
     /// start and reap this host's processes, bridge what crosses hosts onto
     /// Zenoh, follow the coordinator's lockstep clock.
     Host(host::HostCmd),
+    /// Make a deployment's CA and a certificate per host and for the
+    /// coordinator, for TLS with mutual authentication between hosts.
+    Certs(certs::CertsCmd),
     /// A live table of a running run's processes: step times, CPU,
     /// memory, restarts, samples lost, per-input latency, the recorder's
     /// throughput, the latest events.
@@ -175,6 +179,7 @@ pub fn main() -> ExitCode {
         Cmd::Recover(cmd) => recover::run(cmd),
         Cmd::Replay(cmd) => replay::run(cmd),
         Cmd::Top(cmd) => top::run(cmd),
+        Cmd::Certs(cmd) => certs::run(cmd),
         Cmd::Bench(BenchCmd::Ipc(cmd)) => bench::ipc::run(cmd),
         Cmd::Bench(BenchCmd::Run(cmd)) => bench::run::run(cmd),
         Cmd::Bench(BenchCmd::Scale(cmd)) => bench::scale::run(cmd),

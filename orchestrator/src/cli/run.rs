@@ -1,5 +1,6 @@
 //! `shoal run`: one scenario, its recording, summary and plots.
 
+use anyhow::Context as _;
 use std::path::PathBuf;
 
 use shoal_runtime::Mode;
@@ -54,6 +55,12 @@ pub struct RunCmd {
     /// (hosts.json gives it).
     #[arg(long, value_name = "FILE|netns:K")]
     hosts: Option<PathBuf>,
+    /// With --hosts: reach the hosts over plain TCP (tcp/ endpoints), with
+    /// no authentication and no access control. Without it, every link is
+    /// QUIC (TLS 1.3) with mutual authentication: quic/ endpoints and a
+    /// [tls] section naming the coordinator's certificates (`shoal certs`).
+    #[arg(long, requires = "hosts")]
+    insecure: bool,
     /// Watch the run while it runs: the recorder serves every channel it
     /// records, as it records it (same topics, schemas and CDR bodies), over
     /// the Foxglove WebSocket protocol on this address (default
@@ -153,7 +160,14 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
         );
     }
     if let (Some(path), None) = (&cmd.hosts, local) {
-        let file = crate::hosts::HostsFile::load(path)?;
+        let mut file = crate::hosts::HostsFile::load(path)?;
+        file.insecure = cmd.insecure;
+        // Refused here, before anything starts, if it is not secured (or
+        // plainly said insecure), or its certificate is not good.
+        if let crate::hosts::tls::Security::Tls(id) = file.security()? {
+            id.check()
+                .context("the coordinator's certificate ([tls] of the hosts file)")?;
+        }
         // Refused here, before anything starts, if it cannot place the group.
         crate::hosts::Placement::new(&file, &scenario)?;
         settings.hosts = Some(file);
@@ -168,9 +182,15 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
             std::fs::create_dir_all(&out)?;
             let bin = launch::bin_dir_or_default(cmd.processes.bin_dir.clone())?;
             let hosts_toml = out.join("hosts.toml");
-            let (net, guard) =
-                crate::hosts::netns::local_hosts(k, &bin, &out.join("agents"), &hosts_toml)?;
-            let file = crate::hosts::HostsFile::load(&hosts_toml)?;
+            let (net, guard) = crate::hosts::netns::local_hosts(
+                k,
+                &bin,
+                &out.join("agents"),
+                &hosts_toml,
+                cmd.insecure,
+            )?;
+            let mut file = crate::hosts::HostsFile::load(&hosts_toml)?;
+            file.insecure = cmd.insecure;
             crate::hosts::Placement::new(&file, &scenario)?;
             settings.hosts = Some(file);
             Some((guard, net))

@@ -31,6 +31,10 @@ pub struct AgentOptions {
     pub bin_dir: PathBuf,
     /// Serve one run, then exit.
     pub once: bool,
+    /// TLS as this host's identity, or plain TCP.
+    pub security: super::tls::Security,
+    /// The certificate names this agent takes orders from (over TLS).
+    pub coordinators: Vec<String>,
 }
 
 /// A run this host finished, waiting for the coordinator to collect it.
@@ -72,7 +76,13 @@ enum Served {
 fn open_session(opts: &AgentOptions) -> anyhow::Result<zenoh::Session> {
     let start = Instant::now();
     loop {
-        match zenoh::open(wire::agent_config(&opts.listen)?).wait() {
+        match zenoh::open(wire::agent_config(
+            &opts.listen,
+            &opts.security,
+            &opts.coordinators,
+        )?)
+        .wait()
+        {
             Ok(s) => return Ok(s),
             Err(e) if start.elapsed() < Duration::from_secs(5) => {
                 tracing::debug!("Zenoh session on {:?}: {e}; again", opts.listen);
@@ -106,11 +116,24 @@ fn serve_session(
         .map_err(|e| anyhow::anyhow!("liveliness token: {e}"))?;
     if first {
         tracing::info!(name = %opts.name, listen = ?opts.listen, "host agent ready");
-        eprintln!(
-            "shoal host {} listening on {}",
-            opts.name,
-            opts.listen.join(", ")
-        );
+        match &opts.security {
+            super::tls::Security::Tls(id) => eprintln!(
+                "shoal host {} listening on {} (TLS, mutual authentication: certificate {}, CA {}); answers only {}",
+                opts.name,
+                opts.listen.join(", "),
+                id.cert.display(),
+                id.ca.display(),
+                opts.coordinators.join(", ")
+            ),
+            super::tls::Security::Insecure => {
+                tracing::warn!("INSECURE: plain TCP, no authentication, no access control");
+                eprintln!(
+                    "shoal host {} listening on {}: INSECURE (--insecure): plain TCP, no authentication, no access control; anyone who reaches it can start, read and abort runs",
+                    opts.name,
+                    opts.listen.join(", ")
+                );
+            }
+        }
     }
     // When this session sent a finished run's files.
     let mut sent_at: Option<Instant> = None;
@@ -148,6 +171,7 @@ fn serve_session(
                 .and_then(|b| serde_json::from_slice::<StartOrder>(&b).context("start order"));
             match order {
                 Ok(order) => {
+                    tracing::info!(run = %order.run_id, coordinator = %order.coordinator, "a run starts");
                     if let Some(old) = finished.take() {
                         tracing::warn!(run = %old.run_id, "a run was never collected; its files stay in {}", old.out.display());
                     }
@@ -257,8 +281,8 @@ struct Share {
 /// Why this host's share ended early, as the coordinator is told.
 #[derive(Debug, thiserror::Error)]
 enum Stopped {
-    #[error("the coordinator aborted the run: {0}")]
-    Aborted(String),
+    #[error("the coordinator `{}` aborted the run: {}", .0.from, .0.reason)]
+    Aborted(wire::AbortMsg),
     #[error("the coordinator is gone (it ended, or the link to it is cut)")]
     CoordinatorGone,
 }
@@ -455,8 +479,8 @@ fn prepare(
         session
             .declare_subscriber(wire::abort(run_id))
             .callback(move |s| {
-                let reason = String::from_utf8_lossy(&s.payload().to_bytes()).into_owned();
-                let _ = abort_tx.send(Inbound::Abort(reason));
+                let msg = wire::AbortMsg::decode(&s.payload().to_bytes());
+                let _ = abort_tx.send(Inbound::Abort(msg));
             })
             .wait()
             .map_err(zerr("abort subscriber"))?,

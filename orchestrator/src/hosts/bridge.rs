@@ -105,7 +105,7 @@ pub enum Inbound {
     /// The run's last tick is done.
     End,
     /// The coordinator aborted the run.
-    Abort(String),
+    Abort(super::wire::AbortMsg),
     /// The coordinator's liveliness token went away (it died, or the link).
     CoordinatorGone,
 }

@@ -33,7 +33,7 @@ enum Heard {
 #[derive(Debug, thiserror::Error)]
 pub enum HostsError {
     /// An agent is not there.
-    #[error("no agent answers as host(s) {missing:?} (expected at {endpoints:?}); agents that answer: {present:?}. Start `shoal host --listen <endpoint> --name <host>` on each")]
+    #[error("no agent answers as host(s) {missing:?} (expected at {endpoints:?}); agents that answer: {present:?}. Start `shoal host --listen <endpoint> --name <host>` on each{tls}")]
     AgentsMissing {
         /// Hosts that did not answer.
         missing: Vec<String>,
@@ -41,6 +41,8 @@ pub enum HostsError {
         endpoints: Vec<String>,
         /// Hosts that did.
         present: Vec<String>,
+        /// Over TLS: what a handshake with each missing host says.
+        tls: String,
     },
     /// A host's agent went away during the run.
     #[error(
@@ -93,10 +95,32 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
     )?;
     let _ = launch::termination_requested();
     let run_id = sys::random_id();
-    let session = zenoh::open(wire::coordinator_config(&placement.endpoints)?)
-        .wait()
-        .map_err(zerr("session"))?;
-    await_agents(&session, &placement)?;
+    let security = hosts.security()?;
+    let me = match &security {
+        super::tls::Security::Tls(id) => {
+            let until = id
+                .check()
+                .context("the coordinator's certificate ([tls] of the hosts file)")?;
+            tracing::info!(cert = %id.cert.display(), valid_until = %until, "certificate checked");
+            id.name.clone()
+        }
+        super::tls::Security::Insecure => {
+            tracing::warn!(
+                "INSECURE: plain TCP to the hosts, no authentication, no access control"
+            );
+            format!("insecure coordinator (pid {})", std::process::id())
+        }
+    };
+    let acl =
+        super::tls::coordinator_acl(&run_id, &placement, &placement.crossings(scenario, &run_id));
+    let session = zenoh::open(wire::coordinator_config(
+        &placement.endpoints,
+        &security,
+        Some(&acl),
+    )?)
+    .wait()
+    .map_err(zerr("session"))?;
+    await_agents(&session, &placement, &security)?;
     // Each host's monotonic clock against this one's: realtime puts the
     // epoch on every host's clock with it, and samples' stamps move with it
     // from host to host.
@@ -204,6 +228,7 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
             .iter()
             .map(|from| offsets[h].offset_ns - from.offset_ns)
             .collect(),
+        coordinator: me.clone(),
     };
     let (started, start_error) = start_all(&session, &placement, order);
     let mut driven = Driven::default();
@@ -213,7 +238,11 @@ pub fn run(opts: &RunOptions, hosts: &HostsFile) -> anyhow::Result<RunOutcome> {
         (None, Some(epoch)) => drive_realtime(opts, &placement, &rx, &mut driven, epoch),
     };
     if let Err(e) = &result {
-        let _ = abort.put(format!("{e:#}")).wait();
+        let msg = wire::AbortMsg {
+            from: me.clone(),
+            reason: format!("{e:#}"),
+        };
+        let _ = abort.put(serde_json::to_vec(&msg)?).wait();
     } else {
         clock.put(Vec::<u8>::new()).wait().map_err(zerr("clock"))?;
     }
@@ -431,7 +460,11 @@ fn measure_offsets(
 }
 
 /// Waits until an agent answers as every host of the placement.
-fn await_agents(session: &zenoh::Session, placement: &Placement) -> anyhow::Result<()> {
+fn await_agents(
+    session: &zenoh::Session,
+    placement: &Placement,
+    security: &super::tls::Security,
+) -> anyhow::Result<()> {
     let start = Instant::now();
     loop {
         let replies = session
@@ -458,16 +491,26 @@ fn await_agents(session: &zenoh::Session, placement: &Placement) -> anyhow::Resu
             return Ok(());
         }
         if start.elapsed() > AGENTS_TIMEOUT {
-            let endpoints = missing
+            let endpoints: Vec<String> = missing
                 .iter()
                 .filter_map(|m| placement.hosts.iter().position(|h| h == m))
                 .map(|i| placement.endpoints[i].clone())
                 .collect();
             present.sort();
+            // Over TLS, a handshake of our own says what the link's did not.
+            let tls: Vec<String> = match security {
+                super::tls::Security::Tls(id) => endpoints
+                    .iter()
+                    .zip(&missing)
+                    .map(|(e, h)| format!("\n  {h} at {e}: {}", super::tls::probe(e, id)))
+                    .collect(),
+                super::tls::Security::Insecure => Vec::new(),
+            };
             return Err(HostsError::AgentsMissing {
                 missing,
                 endpoints,
                 present,
+                tls: tls.concat(),
             }
             .into());
         }
@@ -645,6 +688,13 @@ fn drive(
             continue;
         }
         let sim_s = (tick * tick_ns) as f64 / 1e9;
+        if let Some(pace) = opts.pace {
+            // Paced (`--pace`): no tick before its simulated time, scaled.
+            let due_at = start + Duration::from_secs_f64(sim_s / pace);
+            if let Some(wait) = due_at.checked_duration_since(Instant::now()) {
+                std::thread::sleep(wait);
+            }
+        }
         clock
             .put(wire::encode_tick(tick).to_vec())
             .wait()

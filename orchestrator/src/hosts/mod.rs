@@ -11,6 +11,7 @@
 //! | [`bridge`] | iceoryx2 services onto Zenoh and back, on one host |
 //! | [`agent`] | `shoal host`: a host's share of a run |
 //! | [`coordinator`] | `shoal run --hosts`: the run over the agents |
+//! | [`tls`] | certificates, TLS and access control: who may talk to whom |
 //! | [`netns`] | hosts that share nothing on one machine, for tests and benches |
 
 pub mod agent;
@@ -18,6 +19,7 @@ pub mod bridge;
 pub mod coordinator;
 pub mod netns;
 pub mod placement;
+pub mod tls;
 pub mod wire;
 
 pub use placement::{HostsFile, Placement};

@@ -6,6 +6,12 @@
 //! same way. Everything is removed when the [`TestNet`] is dropped, also
 //! after a panic; namespaces a killed harness left are removed by the next.
 //!
+//! The links are QUIC (TLS 1.3) with mutual authentication, as a
+//! deployment's are:
+//! the net makes its own CA and a certificate per host and for the
+//! coordinator (in a directory it removes), and every agent sees them at
+//! `/mnt/certs`. [`TestNet::set_insecure`] makes them plain TCP.
+//!
 //! Needs root (CAP_SYS_ADMIN, CAP_NET_ADMIN), `ip` (iproute2), `unshare`
 //! and `mount` (util-linux). The tests and `shoal bench hosts` use it.
 
@@ -16,13 +22,16 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
-use super::placement::HostsFile;
+use super::placement::{HostsFile, TlsSection};
+use super::tls::{self, CertRequest};
 use crate::launch::os as sys;
 
 /// Namespaces of this module start with it.
 const PREFIX: &str = "shoal-net";
 /// The port agents listen on.
 pub const AGENT_PORT: u16 = 7447;
+/// Where a host sees the net's certificates.
+pub const CERTS_MOUNT: &str = "/mnt/certs";
 
 static NEXT: AtomicU32 = AtomicU32::new(0);
 
@@ -49,6 +58,11 @@ pub struct TestNet {
     pub ctl: String,
     /// The hosts.
     pub hosts: Vec<NetHost>,
+    /// The certificates (`h1`.. and `coordinator`), or `None` once
+    /// [`TestNet::set_insecure`] made the links plain TCP.
+    certs: Option<PathBuf>,
+    /// The directory of the certificates, removed with the net.
+    certs_dir: PathBuf,
 }
 
 fn ip(args: &[&str]) -> anyhow::Result<()> {
@@ -119,10 +133,13 @@ impl TestNet {
             std::process::id(),
             NEXT.fetch_add(1, Ordering::Relaxed)
         );
+        let certs_dir = std::env::temp_dir().join(format!("{tag}-certs"));
         let mut net = Self {
             switch: format!("{tag}-sw"),
             ctl: format!("{tag}-ctl"),
             hosts: Vec::new(),
+            certs: Some(certs_dir.clone()),
+            certs_dir,
         };
         // From here on, Drop removes whatever was made.
         ip(&["netns", "add", &net.switch])?;
@@ -144,7 +161,38 @@ impl TestNet {
             });
             net.join(&netns, &port, &addr)?;
         }
+        let requests: Vec<CertRequest> = net
+            .hosts
+            .iter()
+            .map(|h| CertRequest {
+                name: h.name.clone(),
+                addresses: vec![h.addr.clone()],
+            })
+            .chain([CertRequest {
+                name: tls::DEFAULT_COORDINATOR.into(),
+                addresses: Vec::new(),
+            }])
+            .collect();
+        tls::make_certs(&net.certs_dir, &requests, 0, 2)?;
         Ok(net)
+    }
+
+    /// Plain TCP from here on: agents started after this listen on tcp/
+    /// with `--insecure`, and the hosts file allows it.
+    pub fn set_insecure(&mut self) {
+        self.certs = None;
+    }
+
+    /// The directory of the net's certificates (`ca.pem`, `h1.pem`, …,
+    /// `coordinator.pem` and their keys), while the links are TLS.
+    pub fn certs(&self) -> Option<&Path> {
+        self.certs.as_deref()
+    }
+
+    /// The directory the net made its certificates in (also after
+    /// [`TestNet::set_insecure`]).
+    pub fn certs_dir(&self) -> &Path {
+        &self.certs_dir
     }
 
     /// Makes namespace `ns` with `eth0` at `addr`, linked to the switch by `port`.
@@ -180,18 +228,39 @@ impl TestNet {
         Ok(())
     }
 
-    /// The endpoint of host `h`'s agent.
+    /// The endpoint of host `h`'s agent (quic/, or tcp/ once insecure).
     pub fn endpoint(&self, h: usize) -> String {
-        format!("tcp/{}:{AGENT_PORT}", self.hosts[h].addr)
+        let scheme = if self.certs.is_some() {
+            tls::SECURE_SCHEME
+        } else {
+            "tcp"
+        };
+        self.endpoint_with(h, scheme)
     }
 
-    /// A hosts file naming every host.
+    /// Host `h`'s endpoint with `scheme` (`quic` or `tcp`).
+    pub fn endpoint_with(&self, h: usize, scheme: &str) -> String {
+        format!("{scheme}/{}:{AGENT_PORT}", self.hosts[h].addr)
+    }
+
+    /// A hosts file naming every host: over TLS with the net's
+    /// certificates, or plain TCP allowed.
     pub fn hosts_file(&self) -> HostsFile {
-        HostsFile::numbered(
+        let mut f = HostsFile::numbered(
             &(0..self.hosts.len())
                 .map(|h| self.endpoint(h))
                 .collect::<Vec<_>>(),
-        )
+        );
+        match &self.certs {
+            Some(dir) => {
+                f.tls = Some(TlsSection {
+                    certs: dir.clone(),
+                    name: tls::DEFAULT_COORDINATOR.into(),
+                })
+            }
+            None => f.insecure = true,
+        }
+        f
     }
 
     /// Starts `shoal host` on host `h` ([`TestNet::spawn_in_host`]); its
@@ -205,28 +274,29 @@ impl TestNet {
         );
         let endpoint = self.endpoint(h);
         let name = self.hosts[h].name.clone();
-        let child = self.spawn_in_host(
-            h,
-            bin_dir,
-            &[
-                "host",
-                "--bin-dir",
-                "/mnt/bin",
-                "--listen",
-                &endpoint,
-                "--name",
-                &name,
-            ],
-            log,
-        )?;
+        let mut args = vec![
+            "host",
+            "--bin-dir",
+            "/mnt/bin",
+            "--listen",
+            &endpoint,
+            "--name",
+            &name,
+        ];
+        if self.certs.is_some() {
+            args.extend(["--certs", CERTS_MOUNT]);
+        } else {
+            args.push("--insecure");
+        }
+        let child = self.spawn_in_host(h, bin_dir, &args, log)?;
         self.hosts[h].agent = Some(child);
         Ok(())
     }
 
     /// Starts `shoal ARGS` on host `h`, in a mount namespace of its own
     /// with fresh `/dev/shm` and `/tmp`; the binaries in `bin_dir` are
-    /// bind-mounted at `/mnt/bin` first (they may lie below `/tmp`). Its
-    /// output goes to `log`.
+    /// bind-mounted at `/mnt/bin` first (they may lie below `/tmp`), and
+    /// the net's certificates at `/mnt/certs`. Its output goes to `log`.
     pub fn spawn_in_host(
         &self,
         h: usize,
@@ -237,10 +307,12 @@ impl TestNet {
         let out = std::fs::File::create(log)
             .with_context(|| format!("cannot create {}", log.display()))?;
         let err = out.try_clone()?;
-        let script = "set -e; mount -t tmpfs shoal-mnt /mnt; mkdir /mnt/bin; \
-             mount --bind \"$0\" /mnt/bin; mount -t tmpfs shoal-shm /dev/shm; \
+        let script = "set -e; mount -t tmpfs shoal-mnt /mnt; mkdir /mnt/bin /mnt/certs; \
+             mount --bind \"$0\" /mnt/bin; mount --bind \"$SHOAL_NET_CERTS\" /mnt/certs; \
+             mount -t tmpfs shoal-shm /dev/shm; \
              mount -t tmpfs shoal-tmp /tmp; exec /mnt/bin/shoal \"$@\"";
         Command::new("ip")
+            .env("SHOAL_NET_CERTS", &self.certs_dir)
             .args(["netns", "exec", &self.hosts[h].netns])
             .args(["unshare", "--mount", "--propagation", "private", "--"])
             .args(["sh", "-c", script])
@@ -367,6 +439,7 @@ impl TestNet {
         for ns in &all {
             let _ = ip(&["netns", "del", ns]);
         }
+        let _ = std::fs::remove_dir_all(&self.certs_dir);
     }
 }
 
@@ -393,6 +466,7 @@ pub fn local_hosts(
     bin_dir: &Path,
     logs: &Path,
     hosts_toml: &Path,
+    insecure: bool,
 ) -> anyhow::Result<(TestNet, CtlGuard)> {
     anyhow::ensure!(
         (1..=16).contains(&k),
@@ -401,6 +475,9 @@ pub fn local_hosts(
     let mut net = TestNet::create(k)
         .context("netns:K makes network namespaces (run as root, with iproute2 and util-linux)")?;
     std::fs::create_dir_all(logs)?;
+    if insecure {
+        net.set_insecure();
+    }
     net.start_agents(bin_dir, logs)?;
     std::fs::write(hosts_toml, toml::to_string(&net.hosts_file())?)?;
     let guard = net.enter_ctl()?;

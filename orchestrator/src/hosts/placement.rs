@@ -65,6 +65,52 @@ pub enum PlacementError {
     /// `world = ...` names a host that is not in the file.
     #[error("[placement] world = `{0}` is not a host of the file")]
     UnknownWorldHost(String),
+    /// A plain TCP endpoint without `--insecure`.
+    #[error("host `{host}` listens on {endpoint}, plain TCP: anyone who reaches it can start, read and abort runs. Use quic/ endpoints (TLS 1.3, mutual authentication) and a [tls] section (`shoal certs` makes the certificates), or say --insecure")]
+    Insecure {
+        /// The host.
+        host: String,
+        /// Its endpoint.
+        endpoint: String,
+    },
+    /// TLS endpoints without certificates.
+    #[error("host `{host}` listens on {endpoint} (QUIC: TLS 1.3), but the hosts file has no [tls] section naming the coordinator's certificates (`certs = \"DIR\"`, as `shoal certs --out DIR` writes them)")]
+    NoCertificates {
+        /// The host.
+        host: String,
+        /// Its endpoint.
+        endpoint: String,
+    },
+    /// Endpoints of another kind, or a mix.
+    #[error("host `{host}`'s endpoint {endpoint} is not {expected}/ADDR:PORT (every host of a run is reached the same way: quic/ (TLS 1.3, mutual authentication), or tcp/ with --insecure; Zenoh's tls/ link is not used: in Zenoh 1.10 it breaks under a run's traffic, zenoh issue 2557)")]
+    MixedEndpoints {
+        /// The host.
+        host: String,
+        /// Its endpoint.
+        endpoint: String,
+        /// The first host's scheme.
+        expected: String,
+    },
+    /// `--insecure` with a [tls] section.
+    #[error("--insecure asks for plain TCP, but the hosts file has a [tls] section and quic/ endpoints: drop one of them")]
+    InsecureWithTls,
+}
+
+/// The coordinator's certificates (`[tls]` of a hosts file).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TlsSection {
+    /// The directory `shoal certs --out DIR` wrote, relative to the hosts
+    /// file's directory: it holds `ca.pem`, `<name>.pem` and `<name>.key`.
+    pub certs: std::path::PathBuf,
+    /// The coordinator's certificate name (default `coordinator`): the
+    /// name every agent is told to answer (`shoal host --coordinator`).
+    #[serde(default = "default_coordinator")]
+    pub name: String,
+}
+
+fn default_coordinator() -> String {
+    super::tls::DEFAULT_COORDINATOR.to_string()
 }
 
 /// One host of a hosts file.
@@ -100,6 +146,13 @@ pub struct HostsFile {
     /// Where the run-level processes go.
     #[serde(default)]
     pub placement: PlacementSection,
+    /// The coordinator's certificates, for quic/ endpoints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tls: Option<TlsSection>,
+    /// `--insecure`: plain TCP allowed. Set by the command line, never
+    /// read from or written to the file.
+    #[serde(skip)]
+    pub insecure: bool,
 }
 
 impl HostsFile {
@@ -109,13 +162,57 @@ impl HostsFile {
             path: path.display().to_string(),
             source,
         })?;
-        Self::parse(&text).map_err(|e| match e {
+        let mut file = Self::parse(&text).map_err(|e| match e {
             PlacementError::Parse { message, .. } => PlacementError::Parse {
                 path: path.display().to_string(),
                 message,
             },
             other => other,
-        })
+        })?;
+        if let (Some(tls), Some(dir)) = (&mut file.tls, path.parent()) {
+            if tls.certs.is_relative() {
+                tls.certs = dir.join(&tls.certs);
+            }
+        }
+        Ok(file)
+    }
+
+    /// How the coordinator reaches the hosts: TLS as the [tls] section's
+    /// certificates say, or plain TCP if `--insecure` allowed it.
+    pub fn security(&self) -> Result<super::tls::Security, PlacementError> {
+        let first = &self.hosts.first().ok_or(PlacementError::NoHosts)?.endpoint;
+        let scheme = first.split('/').next().unwrap_or("").to_string();
+        for h in &self.hosts {
+            if !h.endpoint.starts_with(&format!("{scheme}/"))
+                || !matches!(scheme.as_str(), "quic" | "tcp")
+            {
+                return Err(PlacementError::MixedEndpoints {
+                    host: h.name.clone(),
+                    endpoint: h.endpoint.clone(),
+                    expected: if scheme == "tcp" {
+                        "tcp".into()
+                    } else {
+                        "quic".into()
+                    },
+                });
+            }
+        }
+        let secure = scheme != "tcp";
+        match (secure, &self.tls, self.insecure) {
+            (true, Some(_), true) => Err(PlacementError::InsecureWithTls),
+            (true, Some(t), false) => Ok(super::tls::Security::Tls(super::tls::Identity::in_dir(
+                &t.certs, &t.name,
+            ))),
+            (true, None, _) => Err(PlacementError::NoCertificates {
+                host: self.hosts[0].name.clone(),
+                endpoint: first.clone(),
+            }),
+            (_, _, true) => Ok(super::tls::Security::Insecure),
+            _ => Err(PlacementError::Insecure {
+                host: self.hosts[0].name.clone(),
+                endpoint: first.clone(),
+            }),
+        }
     }
 
     /// Parses and checks a hosts file's text.
@@ -141,6 +238,8 @@ impl HostsFile {
                 })
                 .collect(),
             placement: PlacementSection::default(),
+            tls: None,
+            insecure: false,
         }
     }
 

@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 use shoal_runtime::Mode;
 
 use super::placement::Placement;
+use super::tls::{self, Security};
 use crate::launch::ProcessUsage;
 
 /// The liveliness token of an agent.
@@ -167,6 +168,29 @@ pub struct StartOrder {
     /// sample bridged in from it to put them on this host's clock, ns.
     #[serde(default)]
     pub stamp_shift_ns: Vec<i64>,
+    /// Who sends the order: the coordinator's name (its certificate's,
+    /// over TLS) and where it runs.
+    #[serde(default)]
+    pub coordinator: String,
+}
+
+/// An abort on the wire: who sends it and why.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AbortMsg {
+    /// The coordinator's name (its certificate's, over TLS).
+    pub from: String,
+    /// Why.
+    pub reason: String,
+}
+
+impl AbortMsg {
+    /// An abort from the wire; a payload that is not one is named as such.
+    pub fn decode(bytes: &[u8]) -> Self {
+        serde_json::from_slice(bytes).unwrap_or_else(|_| Self {
+            from: "(unnamed sender)".into(),
+            reason: String::from_utf8_lossy(bytes).into_owned(),
+        })
+    }
 }
 
 /// One reading of an agent's clock: the coordinator's monotonic clock when
@@ -283,36 +307,65 @@ pub struct FileChunk {
 pub const CHUNK_BYTES: usize = 4 << 20;
 
 /// The Zenoh configuration of an agent: a router listening on `listen`,
-/// connecting to nobody, no scouting (agents link only to the coordinator).
-pub fn agent_config(listen: &[String]) -> anyhow::Result<zenoh::Config> {
-    base_config("router", listen, &[])
+/// connecting to nobody, no scouting (agents link only to the coordinator);
+/// over TLS, answering only the `coordinators` named.
+pub fn agent_config(
+    listen: &[String],
+    security: &Security,
+    coordinators: &[String],
+) -> anyhow::Result<zenoh::Config> {
+    let acl = matches!(security, Security::Tls(_)).then(|| tls::agent_acl(coordinators));
+    base_config(listen, &[], security, acl.as_ref())
 }
 
 /// The Zenoh configuration of a coordinator: a router connecting to every
-/// agent, listening nowhere.
-pub fn coordinator_config(connect: &[String]) -> anyhow::Result<zenoh::Config> {
-    base_config("router", &[], connect)
+/// agent, listening nowhere; over TLS with `acl` (see
+/// [`tls::coordinator_acl`]).
+pub fn coordinator_config(
+    connect: &[String],
+    security: &Security,
+    acl: Option<&serde_json::Value>,
+) -> anyhow::Result<zenoh::Config> {
+    base_config(&[], connect, security, acl)
 }
 
 /// A router listening on `listen` and connecting to `connect` (the
 /// benchmark's peers).
-pub fn router_config(listen: &[String], connect: &[String]) -> anyhow::Result<zenoh::Config> {
-    base_config("router", listen, connect)
+pub fn router_config(
+    listen: &[String],
+    connect: &[String],
+    security: &Security,
+    acl: Option<&serde_json::Value>,
+) -> anyhow::Result<zenoh::Config> {
+    base_config(listen, connect, security, acl)
 }
 
-fn base_config(mode: &str, listen: &[String], connect: &[String]) -> anyhow::Result<zenoh::Config> {
+fn base_config(
+    listen: &[String],
+    connect: &[String],
+    security: &Security,
+    acl: Option<&serde_json::Value>,
+) -> anyhow::Result<zenoh::Config> {
     let mut c = zenoh::Config::default();
     let set = |c: &mut zenoh::Config, k: &str, v: String| {
         c.insert_json5(k, &v)
             .map_err(|e| anyhow::anyhow!("zenoh configuration {k} = {v}: {e}"))
     };
-    set(&mut c, "mode", format!("\"{mode}\""))?;
+    set(&mut c, "mode", "\"router\"".into())?;
     set(&mut c, "listen/endpoints", serde_json::to_string(listen)?)?;
     set(&mut c, "connect/endpoints", serde_json::to_string(connect)?)?;
     set(&mut c, "scouting/multicast/enabled", "false".into())?;
     set(&mut c, "scouting/gossip/enabled", "false".into())?;
     // An agent that is not there yet is retried; a run waits for it.
     set(&mut c, "connect/timeout_ms", "-1".into())?;
+    if let Security::Tls(id) = security {
+        for (k, v) in id.zenoh_settings() {
+            set(&mut c, k, v)?;
+        }
+        if let Some(acl) = acl {
+            set(&mut c, "access_control", acl.to_string())?;
+        }
+    }
     Ok(c)
 }
 

@@ -361,13 +361,17 @@ pub fn mono_ns() -> u64 {
 
 /// Sets up `tracing` for a process: compact lines on stderr, `RUST_LOG` filter
 /// (default `info`, Zenoh's crates `warn`: their `info` is per session and
-/// link), one span field set per process. Colour only when stderr
+/// link, except access control's, which names a peer that matched no
+/// subject and is refused), one span field set per process. Colour only when stderr
 /// is a terminal and `NO_COLOR` is unset: a log file or a pipe gets plain
 /// text.
 pub fn init_tracing() {
     use std::io::IsTerminal as _;
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,zenoh=warn"));
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+        tracing_subscriber::EnvFilter::new(
+            "info,zenoh=warn,zenoh::net::routing::interceptor::access_control=info",
+        )
+    });
     let colour = std::io::stderr().is_terminal()
         && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty());
     let _ = tracing_subscriber::fmt()
