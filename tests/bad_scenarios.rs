@@ -211,73 +211,12 @@ fn hard_nofile() -> u64 {
     hard.parse().unwrap_or(u64::MAX)
 }
 
-/// A scenario of `vehicles` in a binary tree, then `extra` as it is.
-fn sized_scenario(vehicles: usize, extra: &str) -> String {
-    let mut s = String::from("name = \"big\"\nduration_s = 10.0\n");
-    for i in 0..vehicles {
-        s.push_str(&format!("[[vehicles]]\nname = \"V{i}\"\n"));
-        if i > 0 {
-            let side = if i % 2 == 0 { 4.0 } else { -4.0 };
-            s.push_str(&format!(
-                "parent = \"V{}\"\nslot_m = [-8.0, {side}, 0.0]\n",
-                (i - 1) / 2
-            ));
-        }
-    }
-    s.push_str(extra);
-    s
-}
-
-fn spheres(n: usize) -> String {
-    (0..n)
-        .map(|k| {
-            format!("[[obstacles]]\nkind = \"sphere\"\ncenter_ned_m = [{}.0, 0.0, 10.0]\nradius_m = 1.0\n", 100 + k)
-        })
-        .collect()
-}
-
-fn mesh(triangles: usize) -> String {
-    let tri = vec!["[0,1,2]"; triangles].join(",");
-    format!("[[obstacles]]\nkind = \"mesh\"\nvertices_ned_m = [[0.0,0.0,0.0],[1.0,0.0,0.0],[0.0,1.0,0.0]]\ntriangles = [{tri}]\n")
-}
-
 #[test]
 fn oversized_inputs_are_refused_by_their_counts_before_anything_that_grows_with_them() {
     let dir = tempfile::tempdir().unwrap();
     let sandbox = Sandbox::new();
-    let big_text = format!(
-        "name = \"x\"\nduration_s = 1.0\n{}",
-        format!("# {}\n", "x".repeat(97)).repeat(1_000_000)
-    );
-    let cases: [(&str, String, &str); 6] = [
-        (
-            "10k-vehicles",
-            sized_scenario(10_000, ""),
-            "10000 vehicles, at most 256",
-        ),
-        (
-            "5k-obstacles",
-            sized_scenario(3, &spheres(5_000)),
-            "5000 obstacles, at most 4096",
-        ),
-        (
-            "100k-obstacles",
-            sized_scenario(3, &spheres(100_000)),
-            "more than a scenario may be (4.0 MiB)",
-        ),
-        ("100MB", big_text, "more than a scenario may be (4.0 MiB)"),
-        (
-            "300k-triangles",
-            sized_scenario(1, &mesh(300_000)),
-            "300000 mesh triangles in all, at most 200000",
-        ),
-        (
-            "1M-triangles",
-            sized_scenario(1, &mesh(1_000_000)),
-            "more than a scenario may be (4.0 MiB)",
-        ),
-    ];
-    for (name, text, expect) in cases {
+    // The inputs `shoal bench refuse` times.
+    for (name, text, expect) in shoal::bench::refuse::oversized_inputs() {
         let path = dir.path().join(format!("{name}.toml"));
         std::fs::write(&path, text).unwrap();
         let out = sandbox.check(&path, None);

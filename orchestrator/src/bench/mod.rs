@@ -3,6 +3,7 @@
 
 pub mod hosts;
 pub mod ipc;
+pub mod refuse;
 pub mod run;
 pub mod scale;
 pub mod soak;

@@ -138,6 +138,10 @@ enum BenchCmd {
     /// tick over 1, 2 and 4 hosts, a large group over several hosts, and
     /// 1,000 vehicles over 16 hosts on paper.
     Hosts(bench::hosts::HostsBenchCmd),
+    /// How fast, and in how much memory, `shoal check` refuses inputs far
+    /// too large (10,000 vehicles, 100,000 obstacles, 100 MB, a million
+    /// mesh triangles).
+    Refuse(bench::refuse::RefuseCmd),
     /// A long realtime run (25 vehicles for an hour by default) watched
     /// from outside: memory, open descriptors and shared-memory files over
     /// time, and how much each grew after the first minute.
@@ -187,6 +191,7 @@ pub fn main() -> ExitCode {
         Cmd::Bench(BenchCmd::Vision(cmd)) => bench::vision::run(cmd),
         Cmd::Bench(BenchCmd::Hosts(cmd)) => bench::hosts::run(cmd),
         Cmd::Bench(BenchCmd::Soak(cmd)) => bench::soak::run(cmd),
+        Cmd::Bench(BenchCmd::Refuse(cmd)) => bench::refuse::run(cmd),
         Cmd::Bench(BenchCmd::HopPeer(cmd)) => bench::hosts::hop_peer(cmd),
     };
     match result {

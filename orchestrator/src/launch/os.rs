@@ -175,6 +175,27 @@ pub fn die_with_parent(cmd: &mut Command) {
     }
 }
 
+/// Waits for child `pid` to exit and reaps it: its exit and usage, or
+/// `None` if it is not a child of this process.
+pub fn wait_pid(pid: i32) -> Option<ExitInfo> {
+    let mut status: libc::c_int = 0;
+    // SAFETY: an all-zero rusage is a valid value; wait4 fills it.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: plain syscall with pointers to locals.
+    let r = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+    (r == pid).then(|| exit_info(status, &usage))
+}
+
+/// Gives the heap's free memory back to the system (`malloc_trim`), so
+/// that a child spawned next does not count this process's freed pages in
+/// its peak (a vfork'd child's peak includes the parent's resident pages).
+pub fn trim_heap() {
+    // SAFETY: malloc_trim only walks glibc's own free lists.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
 /// Reaps one exited child without blocking: `Some((pid, info))`, or `None`
 /// if no child has exited.
 pub fn reap_any() -> Option<(i32, ExitInfo)> {
@@ -186,18 +207,7 @@ pub fn reap_any() -> Option<(i32, ExitInfo)> {
     if pid <= 0 {
         return None;
     }
-    let code = libc::WIFEXITED(status).then(|| libc::WEXITSTATUS(status));
-    let signal = libc::WIFSIGNALED(status).then(|| libc::WTERMSIG(status));
-    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-    Some((
-        pid,
-        ExitInfo {
-            code,
-            signal,
-            cpu_s: tv(usage.ru_utime) + tv(usage.ru_stime),
-            max_rss_kib: usage.ru_maxrss,
-        },
-    ))
+    Some((pid, exit_info(status, &usage)))
 }
 
 /// Sends a signal to a process.
@@ -481,4 +491,15 @@ pub fn page_size() -> u64 {
     // SAFETY: sysconf only reads a constant.
     let p = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
     u64::try_from(p).unwrap_or(4096).max(1)
+}
+
+/// An exit status and a usage as [`ExitInfo`].
+fn exit_info(status: libc::c_int, usage: &libc::rusage) -> ExitInfo {
+    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    ExitInfo {
+        code: libc::WIFEXITED(status).then(|| libc::WEXITSTATUS(status)),
+        signal: libc::WIFSIGNALED(status).then(|| libc::WTERMSIG(status)),
+        cpu_s: tv(usage.ru_utime) + tv(usage.ru_stime),
+        max_rss_kib: usage.ru_maxrss,
+    }
 }
