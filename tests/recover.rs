@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 
 use recordings::Recording;
-use shoal_tests::{python, repo_root, run_shoal, small_scenario, write_scenario};
+use shoal_tests::{python, repo_root, run_shoal, run_shoal_ok, small_scenario, write_scenario};
 
 /// Runs the small scenario with 16 KiB chunks (many chunks) and returns
 /// the recording's path.
@@ -286,7 +286,21 @@ fn a_run_that_fills_its_disk_stops_naming_the_disk_and_its_recording_still_reads
     let tmp = tempfile::tempdir().unwrap();
     let disk = SmallDisk::mount(&tmp.path().join("small"), "3m");
     let out = disk.0.join("run");
-    // The paper scenario records about 5 MB: it cannot fit.
+    // `shoal check` says beforehand that it will not fit; with room
+    // elsewhere, it says nothing.
+    let o = run_shoal_ok(&["check", "--out", out.to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("warning: the output disk cannot hold the expected recording"),
+        "{said}"
+    );
+    let o = run_shoal_ok(&["check", "--out", tmp.path().to_str().unwrap()]);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("recording: about") && !said.contains("cannot hold"),
+        "{said}"
+    );
+    // The paper scenario records about 10 MB: it cannot fit.
     let o = run_shoal(&["run", "--quiet", "--out", out.to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success(), "the run fitted on 3 MiB");

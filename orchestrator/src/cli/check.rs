@@ -13,7 +13,12 @@ const ZENOH_OVERHEAD: usize = 16;
 /// Resolves the scenario at `path` (default: the paper's) and prints each
 /// follower's slot and D_a/D_b, with any advice; with `resolved`, the
 /// effective scenario as TOML instead; with `hosts`, the placement.
-pub fn run(path: Option<PathBuf>, resolved: bool, hosts: Option<PathBuf>) -> anyhow::Result<()> {
+pub fn run(
+    path: Option<PathBuf>,
+    resolved: bool,
+    hosts: Option<PathBuf>,
+    out: Option<PathBuf>,
+) -> anyhow::Result<()> {
     let mut s = preflight::load_scenario(&path)?;
     preflight::resolve(&mut s)?;
     if resolved {
@@ -64,6 +69,24 @@ pub fn run(path: Option<PathBuf>, resolved: bool, hosts: Option<PathBuf>) -> any
     }
     for line in preflight::advice(&s) {
         println!("warning: {line}");
+    }
+    let out = out.unwrap_or_else(|| PathBuf::from("runs"));
+    let expected = preflight::resources::expected_recording_bytes(&s);
+    let free = preflight::resources::free_bytes_at(&out);
+    println!(
+        "  recording: about {:.0} MB expected; {}",
+        expected as f64 / 1e6,
+        free.map_or("the output disk's free space is unknown".to_string(), |f| {
+            format!("{} has {:.0} MB free", out.display(), f as f64 / 1e6)
+        })
+    );
+    if let Some(free) = free.filter(|&f| f < expected) {
+        println!(
+            "warning: the output disk cannot hold the expected recording (about {:.0} MB; {} has {:.0} MB free): the run would stop when the disk fills, its recording readable up to there. Free space, shorten the run (--duration), or write elsewhere (--out)",
+            expected as f64 / 1e6,
+            out.display(),
+            free as f64 / 1e6
+        );
     }
     for v in s.vehicles.iter().filter(|v| v.parent.is_some()) {
         println!(

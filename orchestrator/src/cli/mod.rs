@@ -72,6 +72,10 @@ enum Cmd {
         /// each link needs.
         #[arg(long)]
         hosts: Option<PathBuf>,
+        /// Where the run would write (default: runs/, as `shoal run`):
+        /// warns when that disk cannot hold the expected recording.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
     },
     /// Run the method, the paper's method as published, the acoustic-modem
     /// baseline and the no-vertical-shift ablation side by side; write
@@ -168,7 +172,8 @@ pub fn main() -> ExitCode {
             scenario,
             resolved,
             hosts,
-        } => check::run(scenario, resolved, hosts),
+            out,
+        } => check::run(scenario, resolved, hosts, out),
         Cmd::Host(cmd) => host::run(cmd),
         Cmd::Inspect {
             recording,
