@@ -253,6 +253,39 @@ pub fn fits_within(n: &Needs, l: &Limits) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Recording bytes per vehicle per simulated second, measured: the paper
+/// scenario (five vehicles, point camera model) records 1.07 MB in 20 s.
+const RECORDING_BYTES_PER_VEHICLE_S: f64 = 10_700.0;
+/// With the image camera model, per follower per simulated second, on top
+/// (its frames): the paper's image run records 10.57 MB in 20 s.
+const RECORDING_IMAGE_BYTES_PER_FOLLOWER_S: f64 = 119_000.0;
+/// Room left over the measured rates (other courses, more events).
+const RECORDING_MARGIN: f64 = 1.25;
+
+/// The recording a run of `s` is expected to write, bytes.
+pub fn expected_recording_bytes(s: &shoal_scenario::Scenario) -> u64 {
+    let vehicles = s.vehicles.len() as f64;
+    let followers = s.vehicles.iter().filter(|v| v.parent.is_some()).count() as f64;
+    let images = if s.camera_model() == shoal_scenario::CameraModel::Image {
+        followers * RECORDING_IMAGE_BYTES_PER_FOLLOWER_S
+    } else {
+        0.0
+    };
+    ((vehicles * RECORDING_BYTES_PER_VEHICLE_S + images) * s.duration_s * RECORDING_MARGIN) as u64
+}
+
+/// Free bytes on the disk that holds `dir`, or would hold it (its nearest
+/// existing ancestor).
+pub fn free_bytes_at(dir: &std::path::Path) -> Option<u64> {
+    let abs = if dir.is_absolute() {
+        dir.to_path_buf()
+    } else {
+        std::env::current_dir().ok()?.join(dir)
+    };
+    let existing = abs.ancestors().find(|a| a.exists())?;
+    os::statvfs_free(existing.to_str()?).0
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
@@ -364,37 +397,4 @@ mod tests {
         assert!(l.shm_free_bytes.is_some(), "{l:?}");
         assert!(l.processes.is_some(), "{l:?}");
     }
-}
-
-/// Recording bytes per vehicle per simulated second, measured: the paper
-/// scenario (five vehicles, point camera model) records 1.07 MB in 20 s.
-const RECORDING_BYTES_PER_VEHICLE_S: f64 = 10_700.0;
-/// With the image camera model, per follower per simulated second, on top
-/// (its frames): the paper's image run records 10.57 MB in 20 s.
-const RECORDING_IMAGE_BYTES_PER_FOLLOWER_S: f64 = 119_000.0;
-/// Room left over the measured rates (other courses, more events).
-const RECORDING_MARGIN: f64 = 1.25;
-
-/// The recording a run of `s` is expected to write, bytes.
-pub fn expected_recording_bytes(s: &shoal_scenario::Scenario) -> u64 {
-    let vehicles = s.vehicles.len() as f64;
-    let followers = s.vehicles.iter().filter(|v| v.parent.is_some()).count() as f64;
-    let images = if s.camera_model() == shoal_scenario::CameraModel::Image {
-        followers * RECORDING_IMAGE_BYTES_PER_FOLLOWER_S
-    } else {
-        0.0
-    };
-    ((vehicles * RECORDING_BYTES_PER_VEHICLE_S + images) * s.duration_s * RECORDING_MARGIN) as u64
-}
-
-/// Free bytes on the disk that holds `dir`, or would hold it (its nearest
-/// existing ancestor).
-pub fn free_bytes_at(dir: &std::path::Path) -> Option<u64> {
-    let abs = if dir.is_absolute() {
-        dir.to_path_buf()
-    } else {
-        std::env::current_dir().ok()?.join(dir)
-    };
-    let existing = abs.ancestors().find(|a| a.exists())?;
-    os::statvfs_free(existing.to_str()?).0
 }
