@@ -159,24 +159,11 @@ fn the_paper_scenario_over_two_hosts_gives_the_one_host_messages() {
 /// `from`'s namespace against `endpoint` with `args`; its JSON report.
 fn outside_client(net: &TestNet, from: usize, endpoint: &str, args: &[&str]) -> serde_json::Value {
     let py = std::env::var("SHOAL_PYTHON").unwrap_or_else(|_| "python3".into());
-    let o = net
-        .in_host(from, &py)
-        .arg(repo_root().join("tests/python/outside_client.py"))
+    let mut c = net.in_host(from, &py);
+    c.arg(repo_root().join("tests/python/outside_client.py"))
         .args(["--connect", endpoint])
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "outside_client.py: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
-        panic!(
-            "outside_client.py printed no report ({e}): {}",
-            String::from_utf8_lossy(&o.stdout)
-        )
-    })
+        .args(args);
+    report_of(c, "outside_client.py")
 }
 
 #[test]

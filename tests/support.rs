@@ -257,17 +257,28 @@ pub fn python() -> Command {
 /// Runs one of `tests/python/`'s checkers with `args` and returns the JSON
 /// report it prints; a failing checker fails the test with its stderr.
 pub fn python_report<S: AsRef<std::ffi::OsStr>>(script: &str, args: &[S]) -> serde_json::Value {
-    let o = python()
-        .arg(repo_root().join("tests/python").join(script))
-        .args(args)
-        .output()
-        .unwrap();
+    let mut c = python();
+    c.arg(repo_root().join("tests/python").join(script))
+        .args(args);
+    report_of(c, script)
+}
+
+/// Runs `command` (one of `tests/python/`'s scripts, however started) and
+/// returns the JSON report it prints; a failure or no report fails the
+/// test with what it said.
+pub fn report_of(mut command: Command, what: &str) -> serde_json::Value {
+    let o = command.output().unwrap();
     assert!(
         o.status.success(),
-        "{script} failed: {}",
+        "{what} failed: {}",
         String::from_utf8_lossy(&o.stderr)
     );
-    serde_json::from_slice(&o.stdout).unwrap()
+    serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "{what} printed no report ({e}): {}",
+            String::from_utf8_lossy(&o.stdout)
+        )
+    })
 }
 
 /// A JSON array of unsigned integers (a checker's report), as numbers.

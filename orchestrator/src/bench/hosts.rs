@@ -119,17 +119,7 @@ fn hop_security(cmd: &HopPeerCmd) -> (Security, Option<Value>) {
     };
     let id = Identity::in_dir(dir, &cmd.name);
     let acl = if cmd.role == HopRole::Router {
-        let all = [
-            "put",
-            "delete",
-            "declare_subscriber",
-            "query",
-            "reply",
-            "declare_queryable",
-            "liveliness_token",
-            "liveliness_query",
-            "declare_liveliness_subscriber",
-        ];
+        let all = crate::hosts::tls::ALL_MESSAGES;
         json!({
             "enabled": true,
             "default_permission": "deny",

@@ -434,7 +434,7 @@ fn write(path: &Path, bytes: &[u8], private: bool) -> Result<(), TlsError> {
 }
 
 /// Every kind of message Zenoh's access control knows.
-const ALL_MESSAGES: [&str; 9] = [
+pub const ALL_MESSAGES: [&str; 9] = [
     "put",
     "delete",
     "declare_subscriber",
