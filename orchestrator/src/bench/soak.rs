@@ -19,6 +19,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use serde::Serialize;
+use serde_json::json;
 
 use crate::gen::{self, GenOptions};
 use crate::launch::os as sys;
@@ -81,13 +82,15 @@ pub struct Growth {
 }
 
 impl Growth {
-    /// The growth of `f` over `samples` after the first minute; `None`
-    /// if no sample lies at or after 60 s.
+    /// The growth of `f` after the first minute while the whole run is up
+    /// (every process it had at 1 min; the summary after the run is
+    /// another phase, see [`after_run`]); `None` if no sample lies at or
+    /// after 60 s.
     pub fn of(samples: &[SoakSample], f: impl Fn(&SoakSample) -> f64) -> Option<Self> {
-        let i = samples.iter().position(|s| s.t_s >= 60.0)?;
-        let at_1min = f(&samples[i]);
-        let max_after = samples[i..].iter().map(&f).fold(at_1min, f64::max);
-        let last = f(samples.last()?);
+        let live = live(samples)?;
+        let at_1min = f(&live[0]);
+        let max_after = live.iter().map(&f).fold(at_1min, f64::max);
+        let last = f(live.last()?);
         let growth = if at_1min > 0.0 {
             max_after / at_1min - 1.0
         } else if max_after > 0.0 {
@@ -102,6 +105,32 @@ impl Growth {
             growth,
         })
     }
+}
+
+/// The samples from the first minute on while the run has every process
+/// it had then.
+fn live(samples: &[SoakSample]) -> Option<&[SoakSample]> {
+    let i = samples.iter().position(|s| s.t_s >= 60.0)?;
+    let full = samples[i].processes;
+    let n = samples[i..]
+        .iter()
+        .take_while(|s| s.processes >= full)
+        .count();
+    Some(&samples[i..i + n])
+}
+
+/// The largest resident and private memory once the run's processes are
+/// gone (the orchestrator writing the summary, plots and report), KiB.
+pub fn after_run(samples: &[SoakSample]) -> Option<(u64, u64)> {
+    let live = live(samples)?;
+    let i = samples.iter().position(|s| s.t_s >= 60.0)? + live.len();
+    let rest = &samples[i..];
+    (!rest.is_empty()).then(|| {
+        (
+            rest.iter().map(|s| s.rss_kib).max().unwrap_or(0),
+            rest.iter().map(|s| s.anon_kib).max().unwrap_or(0),
+        )
+    })
 }
 
 /// The process ids of `root` and all its descendants, from every
@@ -257,7 +286,7 @@ pub fn run(cmd: SoakCmd) -> anyhow::Result<()> {
     // After the run: what it left behind.
     let after = sample(root, start.elapsed().as_secs_f64(), &mut run_id);
     let growth = |f: fn(&SoakSample) -> f64| Growth::of(&samples, f);
-    let report = serde_json::json!({
+    let report = json!({
         "vehicles": cmd.vehicles,
         "duration_s": cmd.duration,
         "run_ok": status.success(),
@@ -272,6 +301,7 @@ pub fn run(cmd: SoakCmd) -> anyhow::Result<()> {
             "processes": growth(|s| s.processes as f64),
         },
         "left_after_run": { "shm_run": after.shm_run, "processes": after.processes },
+        "summary_phase_peak_kib": after_run(&samples).map(|(rss, anon)| json!({ "rss": rss, "anon": anon })),
     });
     std::fs::write(
         out.join("soak.json"),
@@ -282,6 +312,14 @@ pub fn run(cmd: SoakCmd) -> anyhow::Result<()> {
         "after the run: {} shared-memory files of the run left, {} processes",
         after.shm_run, after.processes
     );
+    if let Some((rss, anon)) = after_run(&samples) {
+        println!(
+            "the summary after the run (the orchestrator alone): at most {:.0} MiB resident, {:.0} MiB private",
+            rss as f64 / 1024.0,
+            anon as f64 / 1024.0
+        );
+    }
+    println!("while the whole run is up, from the first minute:");
     for (name, g) in [
         ("resident memory", growth(|s| s.rss_kib as f64)),
         ("private memory", growth(|s| s.anon_kib as f64)),
@@ -352,6 +390,25 @@ mod tests {
             rss_kib: rss,
             ..SoakSample::default()
         }
+    }
+
+    #[test]
+    fn the_summary_phase_is_apart_from_the_run() {
+        let mut s: Vec<SoakSample> = (0..10).map(|i| at(i as f64 * 30.0, 100)).collect();
+        for x in &mut s {
+            x.processes = 5;
+        }
+        s.push(SoakSample {
+            t_s: 300.0,
+            processes: 1,
+            rss_kib: 4000,
+            anon_kib: 3000,
+            ..SoakSample::default()
+        });
+        let g = Growth::of(&s, |s| s.rss_kib as f64).unwrap();
+        assert_eq!(g.max_after, 100.0);
+        assert_eq!(after_run(&s), Some((4000, 3000)));
+        assert_eq!(after_run(&s[..10]), None);
     }
 
     #[test]
