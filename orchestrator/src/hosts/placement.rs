@@ -249,11 +249,7 @@ impl HostsFile {
         }
         let mut seen = std::collections::BTreeSet::new();
         for h in &self.hosts {
-            let ok = (1..=32).contains(&h.name.len())
-                && h.name
-                    .chars()
-                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
-            if !ok {
+            if !super::tls::valid_name(&h.name) {
                 return Err(PlacementError::BadHostName(h.name.clone()));
             }
             if !seen.insert(h.name.as_str()) {

@@ -128,16 +128,6 @@ pub enum Security {
     Insecure,
 }
 
-impl Security {
-    /// `quic` or `tcp`: the scheme of this security's endpoints.
-    pub fn scheme(&self) -> &'static str {
-        match self {
-            Self::Tls(_) => SECURE_SCHEME,
-            Self::Insecure => "tcp",
-        }
-    }
-}
-
 /// One node's identity in a deployment: the CA it trusts, its certificate
 /// and its private key, and the name the certificate carries.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -304,8 +294,8 @@ fn check_valid_now(
     })
 }
 
-/// A name that can be a certificate's common name and a Zenoh key chunk
-/// (the hosts file's rule for host names).
+/// A name that can be a host's or a certificate's: a Zenoh key chunk and a
+/// file name (1-32 characters of a-z, A-Z, 0-9, '-' or '_').
 pub fn valid_name(name: &str) -> bool {
     (1..=32).contains(&name.len())
         && name
