@@ -110,27 +110,20 @@ pub struct HopPeerCmd {
     name: String,
 }
 
-/// The hop's keys under access control: the two hosts (`h1`, `h2`) may do
-/// anything on the bench's keys at the router; a peer takes them from the
-/// router only, as an agent does from its coordinator.
+/// The hop under access control: the router answers only the two hosts
+/// (`h1`, `h2`); a peer answers only the router, as an agent answers only
+/// its coordinator.
 fn hop_security(cmd: &HopPeerCmd) -> (Security, Option<Value>) {
     let Some(dir) = &cmd.certs else {
         return (Security::Insecure, None);
     };
     let id = Identity::in_dir(dir, &cmd.name);
-    let acl = if cmd.role == HopRole::Router {
-        let all = crate::hosts::tls::ALL_MESSAGES;
-        json!({
-            "enabled": true,
-            "default_permission": "deny",
-            "rules": [{ "id": "hop", "messages": all, "flows": ["ingress", "egress"],
-                        "permission": "allow", "key_exprs": ["shoal/benchhop/**"] }],
-            "subjects": [{ "id": "hosts", "cert_common_names": ["h1", "h2"] }],
-            "policies": [{ "rules": ["hop"], "subjects": ["hosts"] }],
-        })
+    let names = if cmd.role == HopRole::Router {
+        vec!["h1".to_string(), "h2".to_string()]
     } else {
-        crate::hosts::tls::agent_acl(&[crate::hosts::tls::DEFAULT_COORDINATOR.to_string()])
+        vec![crate::hosts::tls::DEFAULT_COORDINATOR.to_string()]
     };
+    let acl = crate::hosts::tls::answer_only(&names);
     (Security::Tls(id), Some(acl))
 }
 

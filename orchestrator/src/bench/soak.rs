@@ -168,13 +168,7 @@ fn tree_of(root: i32) -> Vec<i32> {
 fn run_id_of(pids: &[i32]) -> Option<String> {
     pids.iter().find_map(|pid| {
         let raw = std::fs::read(format!("/proc/{pid}/cmdline")).ok()?;
-        let mut args = raw.split(|&b| b == 0);
-        while let Some(a) = args.next() {
-            if a == b"--run-id" {
-                return args.next().map(|v| String::from_utf8_lossy(v).into_owned());
-            }
-        }
-        None
+        sys::arg_from_cmdline(&raw, "--run-id")
     })
 }
 

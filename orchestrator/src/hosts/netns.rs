@@ -58,10 +58,11 @@ pub struct TestNet {
     pub ctl: String,
     /// The hosts.
     pub hosts: Vec<NetHost>,
-    /// The certificates (`h1`.. and `coordinator`), or `None` once
-    /// [`TestNet::set_insecure`] made the links plain TCP.
-    certs: Option<PathBuf>,
-    /// The directory of the certificates, removed with the net.
+    /// Plain TCP ([`TestNet::set_insecure`]) instead of QUIC with the
+    /// certificates.
+    insecure: bool,
+    /// The directory of the certificates (`h1`.. and `coordinator`),
+    /// removed with the net.
     certs_dir: PathBuf,
 }
 
@@ -138,7 +139,7 @@ impl TestNet {
             switch: format!("{tag}-sw"),
             ctl: format!("{tag}-ctl"),
             hosts: Vec::new(),
-            certs: Some(certs_dir.clone()),
+            insecure: false,
             certs_dir,
         };
         // From here on, Drop removes whatever was made.
@@ -180,13 +181,13 @@ impl TestNet {
     /// Plain TCP from here on: agents started after this listen on tcp/
     /// with `--insecure`, and the hosts file allows it.
     pub fn set_insecure(&mut self) {
-        self.certs = None;
+        self.insecure = true;
     }
 
     /// The directory of the net's certificates (`ca.pem`, `h1.pem`, …,
     /// `coordinator.pem` and their keys), while the links are TLS.
     pub fn certs(&self) -> Option<&Path> {
-        self.certs.as_deref()
+        (!self.insecure).then_some(self.certs_dir.as_path())
     }
 
     /// The directory the net made its certificates in (also after
@@ -230,7 +231,7 @@ impl TestNet {
 
     /// The endpoint of host `h`'s agent (quic/, or tcp/ once insecure).
     pub fn endpoint(&self, h: usize) -> String {
-        let scheme = if self.certs.is_some() {
+        let scheme = if !self.insecure {
             tls::SECURE_SCHEME
         } else {
             "tcp"
@@ -251,14 +252,13 @@ impl TestNet {
                 .map(|h| self.endpoint(h))
                 .collect::<Vec<_>>(),
         );
-        match &self.certs {
-            Some(dir) => {
-                f.tls = Some(TlsSection {
-                    certs: dir.clone(),
-                    name: tls::DEFAULT_COORDINATOR.into(),
-                })
-            }
-            None => f.insecure = true,
+        if self.insecure {
+            f.insecure = true;
+        } else {
+            f.tls = Some(TlsSection {
+                certs: self.certs_dir.clone(),
+                name: tls::DEFAULT_COORDINATOR.into(),
+            });
         }
         f
     }
@@ -283,7 +283,7 @@ impl TestNet {
             "--name",
             &name,
         ];
-        if self.certs.is_some() {
+        if !self.insecure {
             args.extend(["--certs", CERTS_MOUNT]);
         } else {
             args.push("--insecure");

@@ -165,7 +165,7 @@ impl Identity {
         let ca = parse_cert(&ca, &self.ca)?;
         let cert = parse_pem(&cert_pem, &self.cert)?;
         let cert = parse_cert(&cert, &self.cert)?;
-        let name = common_name(&cert);
+        let name = common_name(cert.subject());
         if name != self.name {
             return Err(TlsError::WrongName {
                 path: shown(&self.cert),
@@ -179,15 +179,9 @@ impl Identity {
             return Err(TlsError::ForeignCa {
                 path: shown(&self.cert),
                 name,
-                issuer: cert
-                    .issuer()
-                    .iter_common_name()
-                    .next()
-                    .and_then(|c| c.as_str().ok())
-                    .unwrap_or("?")
-                    .to_string(),
+                issuer: common_name(cert.issuer()),
                 ca: shown(&self.ca),
-                ca_name: common_name(&ca),
+                ca_name: common_name(ca.subject()),
             });
         }
         let key = std::str::from_utf8(&key_pem)
@@ -260,9 +254,9 @@ fn parse_cert<'a>(
     })
 }
 
-fn common_name(cert: &x509_parser::certificate::X509Certificate<'_>) -> String {
-    cert.subject()
-        .iter_common_name()
+/// The common name of a certificate's subject or issuer ("" if none).
+fn common_name(name: &x509_parser::x509::X509Name<'_>) -> String {
+    name.iter_common_name()
         .next()
         .and_then(|c| c.as_str().ok())
         .unwrap_or("")
@@ -279,7 +273,7 @@ fn check_valid_now(
     let now = x509_parser::time::ASN1Time::now();
     Err(TlsError::NotValidNow {
         path: shown(path),
-        name: common_name(cert),
+        name: common_name(cert.subject()),
         validity: format!(
             "from {} to {}",
             cert.validity().not_before,
@@ -424,7 +418,7 @@ fn write(path: &Path, bytes: &[u8], private: bool) -> Result<(), TlsError> {
 }
 
 /// Every kind of message Zenoh's access control knows.
-pub const ALL_MESSAGES: [&str; 9] = [
+const ALL_MESSAGES: [&str; 9] = [
     "put",
     "delete",
     "declare_subscriber",
@@ -446,9 +440,10 @@ fn rule(id: &str, flow: &str, messages: &[&str], keys: &[String]) -> Value {
     })
 }
 
-/// An agent's access control: the coordinators named may do anything on
-/// shoal's keys; nobody else may do anything.
-pub fn agent_acl(coordinators: &[String]) -> Value {
+/// Access control that answers only the certificate `names` given: they
+/// may do anything on shoal's keys, nobody else anything. An agent's, with
+/// its coordinators' names (and the hop bench's router, with its hosts').
+pub fn answer_only(names: &[String]) -> Value {
     let keys = ["shoal-host/**", "shoal-ctl/**", "shoal/**"].map(String::from);
     json!({
         "enabled": true,
@@ -457,7 +452,7 @@ pub fn agent_acl(coordinators: &[String]) -> Value {
             rule("coordinator-in", "ingress", &ALL_MESSAGES, &keys),
             rule("coordinator-out", "egress", &ALL_MESSAGES, &keys),
         ],
-        "subjects": [{ "id": "coordinator", "cert_common_names": coordinators }],
+        "subjects": [{ "id": "coordinator", "cert_common_names": names }],
         "policies": [{ "rules": ["coordinator-in", "coordinator-out"], "subjects": ["coordinator"] }],
     })
 }
@@ -786,7 +781,7 @@ mod tests {
         assert!(keys("h1-publishes").contains(&"shoal/r/run/world".to_string()));
         assert_eq!(acl["default_permission"], "deny");
         assert_eq!(acl["policies"].as_array().unwrap().len(), 2);
-        let agent = agent_acl(&["coordinator".into()]);
+        let agent = answer_only(&["coordinator".into()]);
         assert_eq!(agent["subjects"][0]["cert_common_names"][0], "coordinator");
     }
 }

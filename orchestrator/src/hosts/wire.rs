@@ -314,7 +314,7 @@ pub fn agent_config(
     security: &Security,
     coordinators: &[String],
 ) -> anyhow::Result<zenoh::Config> {
-    let acl = matches!(security, Security::Tls(_)).then(|| tls::agent_acl(coordinators));
+    let acl = matches!(security, Security::Tls(_)).then(|| tls::answer_only(coordinators));
     base_config(listen, &[], security, acl.as_ref())
 }
 

@@ -424,10 +424,16 @@ pub fn parse_status(text: &str) -> Option<MemReading> {
 /// of `--process`); `None` for anything else, including a child between
 /// fork and exec, which still carries the orchestrator's memory.
 pub fn kind_from_cmdline(raw: &[u8]) -> Option<String> {
+    arg_from_cmdline(raw, "--process")
+}
+
+/// The value after `flag` in a NUL-separated command line
+/// (`/proc/PID/cmdline`).
+pub fn arg_from_cmdline(raw: &[u8], flag: &str) -> Option<String> {
     let mut args = raw.split(|&b| b == 0);
     while let Some(a) = args.next() {
-        if a == b"--process" {
-            return args.next().map(|k| String::from_utf8_lossy(k).into_owned());
+        if a == flag.as_bytes() {
+            return args.next().map(|v| String::from_utf8_lossy(v).into_owned());
         }
     }
     None
