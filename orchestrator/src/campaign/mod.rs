@@ -78,6 +78,8 @@ pub struct CampaignOptions {
     pub space: bool,
     /// The first course seed (course `i` has seed `first_course_seed + i div F`).
     pub first_course_seed: u64,
+    /// `--replace` flags every run gets: the user's own method.
+    pub replace: Vec<String>,
 }
 
 /// One run of the campaign.
@@ -440,6 +442,9 @@ pub fn run(o: &CampaignOptions) -> anyhow::Result<Report> {
             if let Some(b) = &o.bin_dir {
                 cmd.arg("--bin-dir").arg(b);
             }
+            for r in &o.replace {
+                cmd.arg("--replace").arg(r);
+            }
             crate::launch::os::die_with_parent(&mut cmd);
             let mut child = cmd
                 .spawn()
@@ -527,6 +532,7 @@ mod tests {
             out: PathBuf::from("unused"),
             shoal: PathBuf::from("shoal"),
             bin_dir: None,
+            replace: Vec::new(),
             keep_recordings: false,
             quiet: true,
             published: false,

@@ -98,8 +98,26 @@ pub struct Report {
     pub by_camera: Vec<Tally>,
     /// Runs stopped by Ctrl-C.
     pub interrupted: usize,
+    /// The method the runs flew: `shoal`, `published` (the paper's as
+    /// published) or the user's `--replace` flags.
+    #[serde(default)]
+    pub method: String,
     /// Every run, in order.
     pub runs: Vec<RunRow>,
+}
+
+/// The method a campaign's runs fly, in words.
+fn method_of(o: &CampaignOptions) -> String {
+    let base = if o.published { "published" } else { "shoal" };
+    if o.replace.is_empty() {
+        return base.to_string();
+    }
+    let flags: Vec<String> = o
+        .replace
+        .iter()
+        .map(|r| format!("--replace '{r}'"))
+        .collect();
+    format!("{base}, with {}", flags.join(" "))
 }
 
 impl Report {
@@ -159,6 +177,7 @@ impl Report {
                 .iter()
                 .filter(|r| r.status == Status::Interrupted)
                 .count(),
+            method: method_of(o),
             runs: rows,
         }
     }
@@ -186,6 +205,9 @@ impl Report {
                 "# Campaign: {} of {} vehicles, {} courses × {} seeds\n",
                 self.shape, self.vehicles, self.courses, self.seeds
             );
+        }
+        if !self.method.is_empty() {
+            let _ = writeln!(t, "Method: {}.\n", self.method);
         }
         let _ = writeln!(
             t,

@@ -73,6 +73,16 @@ pub struct CampaignCmd {
     /// can be judged on another).
     #[arg(long, default_value_t = 0)]
     first_course_seed: u64,
+    /// Run your own method over the campaign: every run gets this
+    /// `--replace PROCESS[@VEHICLES]=COMMAND` (see `shoal run --help`), and
+    /// the report names it. Repeatable.
+    #[arg(long, value_name = "PROCESS[@VEHICLES]=COMMAND", value_parser = check_replace)]
+    replace: Vec<String>,
+}
+
+/// A `--replace` flag as given, once `shoal run` would take it.
+fn check_replace(flag: &str) -> Result<String, String> {
+    super::run::parse_replace(flag).map(|_| flag.to_string())
 }
 
 /// Runs the campaign, prints its table; exit status 3 if a run failed.
@@ -114,6 +124,7 @@ pub fn run(cmd: CampaignCmd) -> anyhow::Result<()> {
         camera: cmd.camera.into(),
         space: cmd.space,
         first_course_seed: cmd.first_course_seed,
+        replace: cmd.replace.clone(),
     };
     let report = campaign::run(&o)?;
     print!("{}", report.markdown());

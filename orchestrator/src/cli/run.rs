@@ -81,6 +81,20 @@ pub struct RunCmd {
     /// wall clock's pace.
     #[arg(long, value_name = "FACTOR")]
     pace: Option<f64>,
+    /// Run a process kind of some or all vehicles with your own program
+    /// instead of shoal's: PROCESS[@VEHICLES]=COMMAND, where PROCESS is
+    /// camera-pose, sonar, planner or mpc, VEHICLES is all (the default),
+    /// followers, leader or names separated by commas, and COMMAND is split
+    /// as a shell splits it; the run's arguments follow it. Repeatable;
+    /// after the scenario's `[[replace]]` entries, so it overrides them.
+    /// Example: --replace 'planner@followers=python3 examples/python/paper_follower.py'
+    #[arg(long, value_name = "PROCESS[@VEHICLES]=COMMAND", value_parser = parse_replace)]
+    replace: Vec<shoal_scenario::replace::Replace>,
+}
+
+/// Parses one `--replace` (for `shoal run` and `shoal campaign`).
+pub fn parse_replace(flag: &str) -> Result<shoal_scenario::replace::Replace, String> {
+    shoal_scenario::replace::Replace::parse_flag(flag)
 }
 
 /// Where the service binaries are and how long a tick may take: the options
@@ -119,6 +133,7 @@ pub fn run(cmd: RunCmd) -> anyhow::Result<()> {
         if let Some(d) = cmd.duration {
             s.duration_s = d;
         }
+        s.replace.extend(cmd.replace.iter().cloned());
     })?;
     let out = cmd
         .out

@@ -396,15 +396,7 @@ fn prepare(
         placement.hosts.get(me),
         opts.name
     );
-    for kind in ProcessKind::ALL {
-        let bin = opts.bin_dir.join(kind.binary());
-        anyhow::ensure!(
-            bin.is_file(),
-            "service binary {} not found on host {}",
-            bin.display(),
-            opts.name
-        );
-    }
+    launch::check_programs(&opts.bin_dir, &scenario, Some(&opts.name))?;
     std::fs::create_dir_all(out.join("logs"))
         .with_context(|| format!("cannot create {}", out.display()))?;
     let scenario_path = out.join("scenario.toml");

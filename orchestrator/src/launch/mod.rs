@@ -286,6 +286,37 @@ impl Ports {
     }
 }
 
+/// Fails, naming it, on a service binary that `bin_dir` lacks or a
+/// replacing command (`[[replace]]`) whose program cannot be found, before
+/// anything starts; `host` names the host in a run over hosts.
+pub(crate) fn check_programs(
+    bin_dir: &Path,
+    scenario: &Scenario,
+    host: Option<&str>,
+) -> anyhow::Result<()> {
+    let on = host.map(|h| format!(" on host {h}")).unwrap_or_default();
+    for kind in ProcessKind::ALL {
+        let bin = bin_dir.join(kind.binary());
+        if !bin.is_file() {
+            bail!(
+                "service binary {} not found{on} (build with `cargo build --release`, or pass --bin-dir)",
+                bin.display()
+            );
+        }
+    }
+    for r in &scenario.replace {
+        let program = &r.command[0];
+        if sys::find_program(program).is_none() {
+            bail!(
+                "the command that replaces {} ({}) names a program that cannot be found{on}: `{program}`",
+                r.process.name(),
+                r.command.join(" ")
+            );
+        }
+    }
+    Ok(())
+}
+
 /// With `on`, keeps idle CPUs polling until the returned guard drops
 /// (`--idle-poll`); an error names what stopped it.
 pub fn idle_poll_guard(on: bool) -> anyhow::Result<Option<std::fs::File>> {
@@ -312,15 +343,7 @@ pub fn run(opts: &RunOptions) -> anyhow::Result<RunOutcome> {
         .with_context(|| format!("cannot write {}", scenario_path.display()))?;
     let recording = opts.out.join("recording.mcap");
     let procs = scenario.processes();
-    for kind in ProcessKind::ALL {
-        let bin = opts.bin_dir.join(kind.binary());
-        if !bin.is_file() {
-            bail!(
-                "service binary {} not found (build with `cargo build --release`, or pass --bin-dir)",
-                bin.display()
-            );
-        }
-    }
+    check_programs(&opts.bin_dir, scenario, None)?;
 
     // A run that died (SIGKILL, power loss) left its domain behind: remove it.
     for (dead, files) in shoal_runtime::sweep_stale_domains() {

@@ -509,3 +509,21 @@ fn exit_info(status: libc::c_int, usage: &libc::rusage) -> ExitInfo {
         max_rss_kib: usage.ru_maxrss,
     }
 }
+
+/// Where `program` is, as `execvp` would find it: a name with a `/` as it
+/// stands (relative to the working directory), any other name in a
+/// directory of `PATH`; `None` when no executable file is there.
+pub fn find_program(program: &str) -> Option<std::path::PathBuf> {
+    use std::os::unix::fs::PermissionsExt;
+    let executable = |p: &std::path::Path| {
+        std::fs::metadata(p).is_ok_and(|m| m.is_file() && m.permissions().mode() & 0o111 != 0)
+    };
+    if program.contains('/') {
+        let p = std::path::PathBuf::from(program);
+        return executable(&p).then_some(p);
+    }
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path)
+        .map(|d| d.join(program))
+        .find(|p| executable(p))
+}

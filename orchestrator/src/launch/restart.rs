@@ -72,9 +72,13 @@ impl Launch {
 }
 
 impl Launch {
-    /// The service binary of `p`.
+    /// The program that runs `p`: its service binary, or the user's
+    /// command that replaces it (`[[replace]]`).
     pub(crate) fn binary(&self, p: &ProcessSpec) -> PathBuf {
-        self.bin_dir.join(p.kind.binary())
+        match self.scenario.replacement(p.kind, &p.vehicle) {
+            Some(command) => PathBuf::from(&command[0]),
+            None => self.bin_dir.join(p.kind.binary()),
+        }
     }
 
     /// The log file of `p` (every incarnation writes to the same one).
@@ -119,7 +123,12 @@ impl Launch {
     /// The command line of `p`'s `restart`-th incarnation.
     pub(crate) fn args(&self, p: &ProcessSpec, restart: u32, resume: Option<&Path>) -> Vec<String> {
         let s = &self.scenario;
-        let mut args = vec![
+        // A replacing command's own arguments go first, the run's after.
+        let mut args: Vec<String> = s
+            .replacement(p.kind, &p.vehicle)
+            .map(|c| c[1..].to_vec())
+            .unwrap_or_default();
+        args.extend([
             "--run-id".to_string(),
             self.run_id.clone(),
             "--vehicle".into(),
@@ -142,7 +151,7 @@ impl Launch {
             self.spin_us.to_string(),
             "--scenario".into(),
             self.scenario_path.display().to_string(),
-        ];
+        ]);
         if restart > 0 {
             args.push("--restart".into());
             args.push(restart.to_string());

@@ -89,6 +89,36 @@ struct Slot {
     sim_time_ns: AtomicU64,
 }
 
+/// The doorbell's layout, for a program that maps it without this crate
+/// (the `shoal_node` Python package, whose copy [`crate::python`]
+/// generates): the bytes of a slot, the slots past the processes', and
+/// each field's byte offset within a slot.
+pub struct Layout {
+    /// Bytes per slot.
+    pub slot_bytes: usize,
+    /// Slots after the processes' own: the tick's count of processes
+    /// stepping, then done's counter.
+    pub extra_slots: usize,
+    /// `(field, byte offset)`, every field of a slot.
+    pub fields: [(&'static str, usize); 8],
+}
+
+/// The layout of [`Slot`].
+pub const LAYOUT: Layout = Layout {
+    slot_bytes: std::mem::size_of::<Slot>(),
+    extra_slots: EXTRA_SLOTS,
+    fields: [
+        ("seq", std::mem::offset_of!(Slot, seq)),
+        ("done", std::mem::offset_of!(Slot, done)),
+        ("counted", std::mem::offset_of!(Slot, counted)),
+        ("last", std::mem::offset_of!(Slot, last)),
+        ("gate", std::mem::offset_of!(Slot, gate)),
+        ("group", std::mem::offset_of!(Slot, group)),
+        ("tick", std::mem::offset_of!(Slot, tick)),
+        ("sim_time_ns", std::mem::offset_of!(Slot, sim_time_ns)),
+    ],
+};
+
 /// The tick a wake-up is for, as the process steps on it.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Rung {

@@ -43,6 +43,7 @@ pub mod domain;
 pub mod doorbell;
 pub mod latency;
 pub mod ports;
+pub mod python;
 pub mod stamp;
 pub mod stats;
 pub mod world;

@@ -17,7 +17,7 @@ use crate::{domain, ChannelLimits, Publisher, RunArgs, RunReport, StepContext};
 
 /// Interval between two published statistics samples, ns (simulated time in
 /// lockstep, wall time in realtime).
-const PUBLISH_EVERY_NS: u64 = 1_000_000_000;
+pub(crate) const PUBLISH_EVERY_NS: u64 = 1_000_000_000;
 
 /// One input channel kind in the exit file.
 #[derive(Debug, Clone, Serialize, Deserialize, Default)]

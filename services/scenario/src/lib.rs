@@ -30,6 +30,7 @@
 
 pub mod faults;
 pub mod ranges;
+pub mod replace;
 
 use std::collections::{BTreeMap, HashMap};
 
@@ -534,6 +535,9 @@ pub struct Scenario {
     /// Faults injected on purpose (`[[faults]]`).
     #[serde(default)]
     pub faults: Vec<faults::Fault>,
+    /// Processes run by the user's own command (`[[replace]]`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub replace: Vec<replace::Replace>,
 }
 
 /// A process kind.
@@ -747,6 +751,7 @@ impl Scenario {
         // The counts first: nothing that grows with them runs before.
         self.validate_sizes()?;
         faults::validate(self)?;
+        replace::validate(self)?;
         for (section, key, from) in DERIVED_KEYS {
             if self.section_table(section)?.contains_key(key) {
                 return Err(invalid(
