@@ -1,0 +1,245 @@
+//! A vehicle's process replaced by the user's own program (`[[replace]]`,
+//! `--replace`), with real processes: the paper's follower planner written
+//! in Python (examples/python/paper_follower.py, on the shoal_node package)
+//! flies the paper scenario in lockstep, in realtime and through a restart;
+//! a user program that crashes, hangs or writes garbage is named in the
+//! run's error (or its counts) and leaves nothing behind.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::path::{Path, PathBuf};
+
+use shoal_tests::*;
+
+/// The Python of the tests, with the checkout's shoal_node package (which
+/// `.ci/run` installs): a missing package fails here, saying how to get it.
+fn python3() -> String {
+    let py = std::env::var("SHOAL_PYTHON").unwrap_or_else(|_| "python3".into());
+    let ok = std::process::Command::new(&py)
+        .args(["-c", "import shoal_node, numpy"])
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false);
+    assert!(
+        ok,
+        "{py} with shoal_node and numpy is required: pip install -e ./python numpy"
+    );
+    py
+}
+
+/// The paper scenario with its followers' planner the Python example.
+fn paper_python() -> String {
+    let text = std::fs::read_to_string(repo_root().join("scenarios/paper-python.toml")).unwrap();
+    // The scenario's command is relative to the repository's root; the
+    // tests run elsewhere.
+    let example = repo_root().join("examples/python/paper_follower.py");
+    text.replace(
+        "command = [\"python3\", \"examples/python/paper_follower.py\"]",
+        &format!("command = [\"{}\", \"{}\"]", python3(), example.display()),
+    )
+}
+
+/// `shoal run` of `scenario` into `dir/out` with `extra`; the output dir.
+fn run(dir: &Path, scenario: &str, extra: &[&str]) -> (std::process::Output, PathBuf) {
+    let sc = write_scenario(dir, "s.toml", scenario);
+    let out = dir.join("out");
+    let mut args = vec![
+        "run",
+        "--quiet",
+        sc.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    (run_shoal(&args), out)
+}
+
+fn run_id(out: &Path) -> String {
+    let run: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+    run["run_id"].as_str().unwrap().to_string()
+}
+
+/// The Python planner's statistics as the summary merged them: every
+/// follower's planner took a step per frame.
+fn assert_python_planners_stepped(s: &serde_json::Value, at_least: u64) {
+    let planner = &s["step_us"]["planner"];
+    // Five planners: the leader's (Rust) and four followers' (Python).
+    assert!(
+        planner["count"].as_u64().unwrap() >= 5 * at_least,
+        "planner steps: {planner}"
+    );
+}
+
+#[test]
+fn the_paper_with_python_follower_planners_passes_in_lockstep() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (o, out) = run(tmp.path(), &paper_python(), &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = summary(&out);
+    assert_eq!(s["verdict"]["pass"], true, "verdict: {}", s["verdict"]);
+    let safety = &s["safety"];
+    assert_eq!(safety["collisions"], 0, "{safety}");
+    let min_pair = safety["min_pair_distance_m"].as_f64().unwrap();
+    assert!(min_pair >= 2.0, "min pair {min_pair} m");
+    let rms = s["formation"]["slot_error_rms_m"]["after"]
+        .as_f64()
+        .unwrap();
+    assert!(rms < 0.5, "after-passage slot RMS {rms} m");
+    // 200 s at 10 Hz.
+    assert_python_planners_stepped(&s, 1900);
+    // The Python processes' setpoints reached the controllers and the
+    // recording: nothing lost, nothing rejected.
+    assert_eq!(s["samples_rejected"]["setpoint"], 0);
+    assert_eq!(s["samples_lost"]["setpoint"], 0);
+    assert_domain_clean(&run_id(&out));
+}
+
+#[test]
+fn python_follower_planners_run_in_realtime_and_through_a_restart() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Realtime: the Python node keeps its phased timer.
+    let rt = tmp.path().join("rt");
+    std::fs::create_dir_all(&rt).unwrap();
+    let (o, out) = run(
+        &rt,
+        &paper_python(),
+        &["--mode", "realtime", "--duration", "6"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = summary(&out);
+    assert_python_planners_stepped(&s, 50);
+    assert_eq!(s["safety"]["collisions"], 0);
+    assert_domain_clean(&run_id(&out));
+
+    // Killed (SIGKILL) at 30 s, restarted with --restart 1, joined again.
+    let rs = tmp.path().join("restart");
+    std::fs::create_dir_all(&rs).unwrap();
+    let scenario = format!(
+        "{}\n[supervision]\npolicy = \"restart\"\n\n[[faults]]\naction = \"kill\"\nvehicle = \"F3\"\nprocess = \"planner\"\nat_s = 30.0\n",
+        paper_python().replace("duration_s = 200.0", "duration_s = 60.0")
+    );
+    let (o, out) = run(&rs, &scenario, &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = summary(&out);
+    let names: Vec<&str> = s["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["process"] == "F3/planner")
+        .map(|e| e["event"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "fault_injected",
+            "process_died",
+            "process_restarted",
+            "process_ready"
+        ]
+    );
+    assert_eq!(s["safety"]["collisions"], 0);
+    assert_domain_clean(&run_id(&out));
+}
+
+/// A user planner for F1 as Python code run with `-c` (the run's arguments
+/// follow it): `body` runs at every step with `node`, `step`, `sn`, `out`
+/// (F1's setpoint publisher) and `msgs` in scope.
+fn user_planner(body: &str) -> String {
+    format!(
+        "planner@F1={} -c 'import shoal_node as sn, time, math\nfrom shoal_node import msgs\nnode = sn.Node.from_args()\nout = node.publisher(\"setpoint\")\nfor step in node.steps():\n{}\n'",
+        python3(),
+        body.lines()
+            .map(|l| format!("    {l}"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    )
+}
+
+#[test]
+fn a_user_program_that_crashes_hangs_or_writes_garbage_is_named_and_leaves_nothing_behind() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = small_scenario("byo", 10.0);
+
+    // Crashes at start: the run's error names the process and its exit.
+    let dir = tmp.path().join("start");
+    std::fs::create_dir_all(&dir).unwrap();
+    let flag = format!("planner@F1={} -c 'raise SystemExit(3)'", python3());
+    let (o, out) = run(&dir, &scenario, &["--replace", &flag]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("F1/planner") && err.contains("exit code 3"),
+        "{err}"
+    );
+    assert_domain_clean(&run_id(&out));
+
+    // Crashes mid-run, with a traceback in its log, which the error shows.
+    let dir = tmp.path().join("mid");
+    std::fs::create_dir_all(&dir).unwrap();
+    let flag =
+        user_planner("if step.sim_time_s > 2.0:\n    raise RuntimeError(\"my planner gave up\")");
+    let (o, out) = run(&dir, &scenario, &["--replace", &flag]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("F1/planner") && err.contains("my planner gave up"),
+        "{err}"
+    );
+    assert_domain_clean(&run_id(&out));
+
+    // Hangs inside a step: the tick timeout names it.
+    let dir = tmp.path().join("hang");
+    std::fs::create_dir_all(&dir).unwrap();
+    let flag = user_planner("if step.sim_time_s > 1.0:\n    time.sleep(3600)");
+    let (o, out) = run(
+        &dir,
+        &scenario,
+        &["--replace", &flag, "--tick-timeout", "2"],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("no progress") && err.contains("F1/planner"),
+        "{err}"
+    );
+    assert_domain_clean(&run_id(&out));
+
+    // Writes garbage (NaN, past the package's own check): the controller
+    // rejects and counts every such sample, the recording holds none, and
+    // the run goes on to its end.
+    let dir = tmp.path().join("nan");
+    std::fs::create_dir_all(&dir).unwrap();
+    let flag = user_planner(
+        "sp = msgs.Setpoint()\nsp.header.sim_time_ns = step.sim_time_ns\nsp.position_m[0] = math.nan\nout._pub.send_copy(sp)",
+    );
+    let (o, out) = run(&dir, &scenario, &["--replace", &flag]);
+    assert!(
+        o.status.success() || o.status.code() == Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let s = summary(&out);
+    let rejected = s["samples_rejected"]["setpoint"].as_u64().unwrap();
+    // 10 s at 10 Hz, each refused by F1's mpc and by the recorder.
+    assert!(rejected >= 2 * 90, "setpoints rejected: {rejected}");
+    let report = python_report("read_mcap.py", &[out.join("recording.mcap")]);
+    let count = report["counts"]["/F1/setpoint"].as_u64().unwrap_or(0);
+    assert_eq!(count, 0, "a NaN setpoint was recorded: {report}");
+    assert_domain_clean(&run_id(&out));
+
+    // A program that cannot be found is refused before anything starts.
+    let dir = tmp.path().join("missing");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (o, out) = run(
+        &dir,
+        &scenario,
+        &["--replace", "mpc@F2=./no-such-controller"],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("no-such-controller") && err.contains("cannot be found"),
+        "{err}"
+    );
+    assert!(!out.join("run.json").exists(), "a refused run started");
+}
