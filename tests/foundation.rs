@@ -472,6 +472,7 @@ fn live_graph(run_id: &str) -> BTreeMap<String, BTreeSet<String>> {
 fn graph_of(
     scenario: &str,
     nodes: &[&str],
+    extra: &[&str],
 ) -> (BTreeMap<String, BTreeSet<String>>, String, String) {
     let tmp = tempfile::tempdir().unwrap();
     let sc = write_scenario(tmp.path(), "s.toml", scenario);
@@ -484,6 +485,7 @@ fn graph_of(
             "--out",
             out.to_str().unwrap(),
         ])
+        .args(extra)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -525,6 +527,24 @@ fn own_or_clock(prefix: &str, service: &str, vehicle: &str) -> bool {
 
 #[test]
 fn followers_planner_and_mpc_open_only_their_own_channels() {
+    followers_open_only_their_own_channels(&[]);
+}
+
+/// The perception rule holds for a user's program too: the followers'
+/// planner replaced by the Python example (`--replace`, the shoal_node
+/// package) opens its own vehicle's channels and the run's, nothing else.
+#[test]
+fn a_python_planner_in_place_of_the_followers_opens_only_their_own_channels() {
+    let flag = format!(
+        "planner@followers=python3 {}",
+        repo_root()
+            .join("examples/python/paper_follower.py")
+            .display()
+    );
+    followers_open_only_their_own_channels(&["--replace", &flag]);
+}
+
+fn followers_open_only_their_own_channels(extra: &[&str]) {
     let nodes = [
         "F1/planner",
         "F1/mpc",
@@ -533,7 +553,7 @@ fn followers_planner_and_mpc_open_only_their_own_channels() {
         "L/planner",
         "F1/camera-pose",
     ];
-    let (graph, prefix, run_id) = graph_of(&small_scenario("graph", 3000.0), &nodes);
+    let (graph, prefix, run_id) = graph_of(&small_scenario("graph", 3000.0), &nodes, extra);
     for follower in ["F1", "F2"] {
         for proc in ["planner", "mpc"] {
             let node = format!("{follower}/{proc}");
@@ -572,7 +592,7 @@ fn with_images_camera_pose_reads_only_its_own_frame_and_the_renderer_reads_the_w
         "F2/camera-pose",
         "F2/camera-sim",
     ];
-    let (graph, prefix, run_id) = graph_of(&small_image_scenario("graph-img", 3000.0), &nodes);
+    let (graph, prefix, run_id) = graph_of(&small_image_scenario("graph-img", 3000.0), &nodes, &[]);
     for follower in ["F1", "F2"] {
         let node = format!("{follower}/camera-pose");
         for s in &graph[&node] {

@@ -243,3 +243,57 @@ fn a_user_program_that_crashes_hangs_or_writes_garbage_is_named_and_leaves_nothi
     );
     assert!(!out.join("run.json").exists(), "a refused run started");
 }
+
+#[test]
+fn the_campaign_runs_a_users_method_and_names_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("c");
+    let flag = format!(
+        "planner@followers={} {}",
+        python3(),
+        repo_root()
+            .join("examples/python/paper_follower.py")
+            .display()
+    );
+    let o = run_shoal(&[
+        "campaign",
+        "--families",
+        "gate,turn",
+        "--courses",
+        "2",
+        "--published",
+        "--quiet",
+        "--replace",
+        &flag,
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&o.stdout).to_string();
+    // A failing run is the method's result, not the campaign's error.
+    assert!(
+        o.status.success() || o.status.code() == Some(3),
+        "{said}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("campaign.json")).unwrap()).unwrap();
+    let method = r["method"].as_str().unwrap();
+    assert!(
+        method.starts_with("published, with --replace 'planner@followers=")
+            && method.contains("paper_follower.py"),
+        "{method}"
+    );
+    assert!(said.contains(method), "the table names the method: {said}");
+    let runs = r["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    for run in runs {
+        let dir = std::path::Path::new(run["dir"].as_str().unwrap());
+        // Each run flew the user's planner: its scenario says so, and its
+        // followers' planner logs are Python's.
+        let scenario = std::fs::read_to_string(dir.join("scenario.toml")).unwrap();
+        assert!(scenario.contains("[[replace]]"), "{scenario}");
+        let s = summary(dir);
+        assert!(s["step_us"]["planner"]["count"].as_u64().unwrap() > 0);
+        assert_eq!(s["samples_rejected"]["setpoint"], 0);
+    }
+}
