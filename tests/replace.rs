@@ -61,7 +61,7 @@ fn run_id(out: &Path) -> String {
 
 /// The Python planner's statistics as the summary merged them: every
 /// follower's planner took a step per frame.
-fn assert_python_planners_stepped(s: &serde_json::Value, at_least: u64) {
+fn assert_planners_stepped(s: &serde_json::Value, at_least: u64) {
     let planner = &s["step_us"]["planner"];
     // Five planners: the leader's (Rust) and four followers' (Python).
     assert!(
@@ -86,7 +86,7 @@ fn the_paper_with_python_follower_planners_passes_in_lockstep() {
         .unwrap();
     assert!(rms < 0.5, "after-passage slot RMS {rms} m");
     // 200 s at 10 Hz.
-    assert_python_planners_stepped(&s, 1900);
+    assert_planners_stepped(&s, 1900);
     // The Python processes' setpoints reached the controllers and the
     // recording: nothing lost, nothing rejected.
     assert_eq!(s["samples_rejected"]["setpoint"], 0);
@@ -107,7 +107,7 @@ fn python_follower_planners_run_in_realtime_and_through_a_restart() {
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = summary(&out);
-    assert_python_planners_stepped(&s, 50);
+    assert_planners_stepped(&s, 50);
     assert_eq!(s["safety"]["collisions"], 0);
     assert_domain_clean(&run_id(&out));
 
@@ -296,4 +296,28 @@ fn the_campaign_runs_a_users_method_and_names_it() {
         assert!(s["step_us"]["planner"]["count"].as_u64().unwrap() > 0);
         assert_eq!(s["samples_rejected"]["setpoint"], 0);
     }
+}
+
+#[test]
+fn an_out_of_tree_rust_follower_takes_the_planners_place_and_passes() {
+    // examples/rust-follower: a crate on shoal's runtime and libraries only,
+    // built with the workspace's binaries.
+    let bin = bin_dir().join("my-follower");
+    assert!(bin.is_file(), "{} not built", bin.display());
+    let tmp = tempfile::tempdir().unwrap();
+    let paper = std::fs::read_to_string(repo_root().join("scenarios/paper.toml")).unwrap();
+    let flag = format!("planner@followers={}", bin.display());
+    let (o, out) = run(tmp.path(), &paper, &["--replace", &flag]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = summary(&out);
+    assert_eq!(s["verdict"]["pass"], true, "verdict: {}", s["verdict"]);
+    let rms = s["formation"]["slot_error_rms_m"]["after"]
+        .as_f64()
+        .unwrap();
+    assert!(rms < 0.5, "after-passage slot RMS {rms} m");
+    assert_planners_stepped(&s, 1900);
+    // The replaced planners ran from the user's binary.
+    let effective = std::fs::read_to_string(out.join("logs/effective-scenario.toml")).unwrap();
+    assert!(effective.contains("my-follower"), "{effective}");
+    assert_domain_clean(&run_id(&out));
 }

@@ -98,10 +98,34 @@ pub fn run(
             v.d_b_m.unwrap_or(0.0)
         );
     }
+    print_replacements(&s);
     if let Some(path) = hosts {
         print_placement(&s, &HostsFile::load(&path)?)?;
     }
     Ok(())
+}
+
+/// Which processes a user's command runs (`[[replace]]`, `--replace`), one
+/// line per command, and a warning for a program that cannot be found here.
+fn print_replacements(s: &shoal_scenario::Scenario) {
+    let mut by_command: Vec<(&[String], Vec<String>)> = Vec::new();
+    for p in s.processes() {
+        if let Some(command) = s.replacement(p.kind, &p.vehicle) {
+            match by_command.iter_mut().find(|(c, _)| *c == command) {
+                Some((_, list)) => list.push(p.label()),
+                None => by_command.push((command, vec![p.label()])),
+            }
+        }
+    }
+    for (command, list) in by_command {
+        println!("  replaced {} by `{}`", list.join(", "), command.join(" "));
+        if crate::launch::os::find_program(&command[0]).is_none() {
+            println!(
+                "warning: `{}` cannot be found from here (a name is looked up on PATH, a path from the directory shoal runs in)",
+                command[0]
+            );
+        }
+    }
 }
 
 /// The placement of `s` on `file`'s hosts, the crossings and the links.
