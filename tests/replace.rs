@@ -204,13 +204,14 @@ fn a_user_program_that_crashes_hangs_or_writes_garbage_is_named_and_leaves_nothi
     );
     assert_domain_clean(&run_id(&out));
 
-    // Writes garbage (NaN, past the package's own check): the controller
-    // rejects and counts every such sample, the recording holds none, and
-    // the run goes on to its end.
+    // Writes garbage (NaN, or more keep-out points than a setpoint holds,
+    // past the package's own check): the controller rejects and counts
+    // every such sample, the recording holds none, and the run goes on to
+    // its end.
     let dir = tmp.path().join("nan");
     std::fs::create_dir_all(&dir).unwrap();
     let flag = user_planner(
-        "sp = msgs.Setpoint()\nsp.header.sim_time_ns = step.sim_time_ns\nsp.position_m[0] = math.nan\nout._pub.send_copy(sp)",
+        "sp = msgs.Setpoint()\nsp.header.sim_time_ns = step.sim_time_ns\nif step.tick % 2:\n    sp.position_m[0] = math.nan\nelse:\n    sp.keepout_count = 99\nout._pub.send_copy(sp)",
     );
     let (o, out) = run(&dir, &scenario, &["--replace", &flag]);
     assert!(

@@ -54,7 +54,7 @@ pub trait Sample:
     /// per type by the declaring macro, see [`Finite`]; the schema-walking
     /// reference is [`schema::finite_by_schema`]). A type whose sample
     /// holds slots beyond its own count (the world snapshot) checks only
-    /// the slots in use.
+    /// the slots in use; a setpoint also checks its ranges.
     #[inline]
     fn is_finite(&self) -> bool {
         Finite::all_finite(self)
@@ -560,7 +560,7 @@ sample! {
     /// The target for mpc, in the vehicle's level frame: origin at the vehicle
     /// now, x along the current heading projected on the horizontal, y to
     /// starboard (horizontal), z down.
-    pub struct Setpoint("shoal_msgs/msg/Setpoint", "shoal.Setpoint.v2", size = 352) {
+    pub struct Setpoint("shoal_msgs/msg/Setpoint", "shoal.Setpoint.v2", size = 352, finite = setpoint_is_valid) {
         /// Common header.
         pub header: Header,
         /// Where the vehicle should be, level frame, m.
@@ -586,6 +586,32 @@ sample! {
         /// Explicit padding.
         pub _pad0: u32,
     }
+}
+
+/// Farthest a [`Setpoint`]'s target may lie from its vehicle, m: a planner's
+/// next waypoint is well within it; beyond it the value is garbage.
+pub const SETPOINT_MAX_RANGE_M: f64 = 1.0e4;
+
+/// Fastest a [`Setpoint`]'s target (or the parent estimate it carries) may
+/// move, m/s: an AUV swims at a few.
+pub const SETPOINT_MAX_SPEED_MPS: f64 = 100.0;
+
+/// [`Sample::is_finite`] of a setpoint: every float finite, and every value
+/// in its range (a target within [`SETPOINT_MAX_RANGE_M`], speeds within
+/// [`SETPOINT_MAX_SPEED_MPS`], a turn within ±2π, at most [`MAX_KEEPOUT`]
+/// returns, `parent_valid` 0 or 1). A planner may be the user's own program
+/// (`[[replace]]`): what the controller and the recorder take from it is
+/// checked like a sensor's.
+fn setpoint_is_valid(s: &Setpoint) -> bool {
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    Finite::all_finite(s)
+        && norm(&s.position_m) <= SETPOINT_MAX_RANGE_M
+        && norm(&s.velocity_mps) <= SETPOINT_MAX_SPEED_MPS
+        && s.yaw_rel_rad.abs() <= std::f64::consts::TAU
+        && (s.keepout_count as usize) <= MAX_KEEPOUT
+        && s.parent_valid <= 1
+        && norm(&s.parent_position_m) <= SETPOINT_MAX_RANGE_M
+        && norm(&s.parent_velocity_mps) <= SETPOINT_MAX_SPEED_MPS
 }
 
 /// What the controller's safety layer keeps clear of, as the planner hands it over with a
@@ -1521,5 +1547,36 @@ mod tests {
             let back: Nav = bytemuck::pod_read_unaligned(&bytes);
             prop_assert_eq!(back, nav);
         }
+    }
+}
+
+#[cfg(test)]
+mod setpoint_range_tests {
+    use super::*;
+
+    #[test]
+    fn a_setpoint_out_of_range_is_refused_like_a_non_finite_one() {
+        let ok = Setpoint::zeroed();
+        assert!(ok.is_finite());
+        let bad: [fn(&mut Setpoint); 8] = [
+            |s| s.position_m[0] = f64::NAN,
+            |s| s.position_m[1] = 2.0 * SETPOINT_MAX_RANGE_M,
+            |s| s.velocity_mps[2] = -2.0 * SETPOINT_MAX_SPEED_MPS,
+            |s| s.yaw_rel_rad = 7.0,
+            |s| s.keepout_count = MAX_KEEPOUT as u32 + 1,
+            |s| s.parent_valid = 2,
+            |s| s.parent_position_m[0] = 1e9,
+            |s| s.parent_velocity_mps[0] = f64::INFINITY,
+        ];
+        for (i, spoil) in bad.iter().enumerate() {
+            let mut s = ok;
+            spoil(&mut s);
+            assert!(!s.is_finite(), "case {i}");
+        }
+        let mut edge = ok;
+        edge.position_m = [SETPOINT_MAX_RANGE_M, 0.0, 0.0];
+        edge.keepout_count = MAX_KEEPOUT as u32;
+        edge.yaw_rel_rad = -std::f64::consts::PI;
+        assert!(edge.is_finite());
     }
 }

@@ -199,8 +199,9 @@ pub enum RuntimeError {
         #[source]
         source: IoxError,
     },
-    /// A sample with a NaN or infinite value was not published.
-    #[error("refused to publish a sample with a non-finite value on `{service}`")]
+    /// A sample with a NaN or infinite value (or, for a type that checks
+    /// its ranges, a value out of range) was not published.
+    #[error("refused to publish a sample with a non-finite or out-of-range value on `{service}`")]
     NonFinite {
         /// Service name.
         service: String,

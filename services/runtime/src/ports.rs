@@ -478,7 +478,7 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
             self.account(publisher, &h, taken, finite);
             if !finite {
                 drop(sample);
-                tracing::warn!(service = %self.service, seq = h.seq, "rejected a sample with a non-finite value");
+                tracing::warn!(service = %self.service, seq = h.seq, "rejected a sample with a non-finite or out-of-range value");
                 continue;
             }
             match &mut deliver {
@@ -633,7 +633,7 @@ impl<T: Sample, S: Service> Subscriber<T, S> {
         if finite {
             Ok(Some(Some(sample)))
         } else {
-            tracing::warn!(service = %self.service, seq = h.seq, "rejected a sample with a non-finite value");
+            tracing::warn!(service = %self.service, seq = h.seq, "rejected a sample with a non-finite or out-of-range value");
             Ok(Some(None))
         }
     }
