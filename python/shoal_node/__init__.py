@@ -16,6 +16,8 @@ from the Rust types (`contract.py`); `Node` is the process's place in the
 run (see `node.py` for the contract it keeps).
 """
 
+import ctypes as _ctypes
+
 from . import contract as msgs
 from .node import Histogram, Node, Origin, Publisher, Step, Subscriber, non_finite_field
 
@@ -26,3 +28,14 @@ def text(field) -> str:
     """A NUL-padded fixed-size text field (`ProcessStats.vehicle`, ...) as str."""
     raw = bytes(field)
     return raw.split(b"\0", 1)[0].decode("ascii", "replace")
+
+
+def _check_layout() -> None:
+    """Every generated sample type has its Rust size (a ctypes layout that
+    differed would be refused by iceoryx2 only when a port opens)."""
+    for cls, _ in list(msgs.CHANNELS.values()) + list(msgs.RUN_CHANNELS.values()):
+        if _ctypes.sizeof(cls) != cls.SIZE or _ctypes.alignment(cls) != 8:
+            raise ImportError(f"shoal_node: {cls.__name__} is {_ctypes.sizeof(cls)} bytes, the Rust type {cls.SIZE}")
+
+
+_check_layout()

@@ -16,6 +16,11 @@ the step loop with the Rust runtime's contract:
   are published on the run's `stats` channel every simulated second and
   written to the stats file at exit, which `summary.json` merges.
 
+What it does not do, and what stands in: `--spin-us` is taken and ignored
+(a Python process always blocks in its wait); `--no-work` and `--resume` are
+taken and left to the program (`node.args`); a replaced camera-pose reads
+point observations (the image channel's frame type is not in the contract).
+
 Samples are the generated `ctypes` structures of `contract.py`. A publisher
 stamps the header and refuses a sample with a non-finite value; a subscriber
 rejects (and counts) one, and counts gaps in a publisher's sequence as lost.

@@ -222,6 +222,13 @@ pub fn verdict(s: &Summary) -> Verdict {
             "obstacle clearance {m:.2} m below half the safe distance ({half} m)"
         ));
     }
+    // A process wrote garbage (a user's program, or a bug): its readers
+    // refused it, so the vehicle flew without it.
+    for (kind, n) in s.samples_rejected.iter().filter(|(_, n)| **n > 0) {
+        failed.push(format!(
+            "{n} sample(s) on {kind} rejected by their readers (a non-finite or out-of-range value): the process writing {kind} sent garbage"
+        ));
+    }
     for l in &s.perception.parent_lost {
         failed.push(format!(
             "{} without its parent from {:.1} s to {:.1} s (limit {PARENT_LOST_LIMIT_S} s)",
@@ -781,6 +788,23 @@ yaw_deg = 0.0
         assert!(s.safety.obstacle_contacts.is_empty());
         let v = verdict(&s);
         assert!(v.pass && v.failed.is_empty(), "{v:?}");
+    }
+
+    #[test]
+    fn garbage_a_reader_rejected_fails_the_verdict_naming_its_channel() {
+        let mut s = Summary {
+            safety: safety(&scenario(), &Tracks::new(on_slots())),
+            ..Summary::default()
+        };
+        s.samples_rejected.insert("nav".into(), 0);
+        s.samples_rejected.insert("setpoint".into(), 42);
+        let v = verdict(&s);
+        assert!(!v.pass);
+        assert_eq!(v.failed.len(), 1, "{v:?}");
+        assert!(
+            v.failed[0].starts_with("42 sample(s) on setpoint rejected"),
+            "{v:?}"
+        );
     }
 
     #[test]
