@@ -11,16 +11,10 @@ use recordings::Recording;
 use shoal_tests::*;
 
 fn python_with_iceoryx2() -> std::process::Command {
-    let mut py = python();
-    let ok = python()
-        .args(["-c", "import iceoryx2"])
-        .status()
-        .map(|s| s.success())
-        .unwrap_or(false);
-    assert!(
-        ok,
-        "the iceoryx2 Python package is required: pip install -r tests/requirements.txt"
-    );
+    let mut py = std::process::Command::new(python_having(
+        "iceoryx2",
+        "pip install -r tests/requirements.txt",
+    ));
     py.arg(repo_root().join("tests/python/live_truth.py"));
     py
 }

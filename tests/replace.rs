@@ -13,17 +13,7 @@ use shoal_tests::*;
 /// The Python of the tests, with the checkout's shoal_node package (which
 /// `.ci/run` installs): a missing package fails here, saying how to get it.
 fn python3() -> String {
-    let py = std::env::var("SHOAL_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ok = std::process::Command::new(&py)
-        .args(["-c", "import shoal_node, numpy"])
-        .status()
-        .map(|s| s.success())
-        .unwrap_or(false);
-    assert!(
-        ok,
-        "{py} with shoal_node and numpy is required: pip install -e ./python numpy"
-    );
-    py
+    python_having("shoal_node, numpy", "pip install -e ./python numpy")
 }
 
 /// The paper scenario with its followers' planner the Python example.
@@ -40,6 +30,7 @@ fn paper_python() -> String {
 
 /// `shoal run` of `scenario` into `dir/out` with `extra`; the output dir.
 fn run(dir: &Path, scenario: &str, extra: &[&str]) -> (std::process::Output, PathBuf) {
+    std::fs::create_dir_all(dir).unwrap();
     let sc = write_scenario(dir, "s.toml", scenario);
     let out = dir.join("out");
     let mut args = vec![
@@ -99,7 +90,6 @@ fn python_follower_planners_run_in_realtime_and_through_a_restart() {
     let tmp = tempfile::tempdir().unwrap();
     // Realtime: the Python node keeps its phased timer.
     let rt = tmp.path().join("rt");
-    std::fs::create_dir_all(&rt).unwrap();
     let (o, out) = run(
         &rt,
         &paper_python(),
@@ -113,7 +103,6 @@ fn python_follower_planners_run_in_realtime_and_through_a_restart() {
 
     // Killed (SIGKILL) at 30 s, restarted with --restart 1, joined again.
     let rs = tmp.path().join("restart");
-    std::fs::create_dir_all(&rs).unwrap();
     let scenario = format!(
         "{}\n[supervision]\npolicy = \"restart\"\n\n[[faults]]\naction = \"kill\"\nvehicle = \"F3\"\nprocess = \"planner\"\nat_s = 30.0\n",
         paper_python().replace("duration_s = 200.0", "duration_s = 60.0")
@@ -121,22 +110,7 @@ fn python_follower_planners_run_in_realtime_and_through_a_restart() {
     let (o, out) = run(&rs, &scenario, &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = summary(&out);
-    let names: Vec<&str> = s["events"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|e| e["process"] == "F3/planner")
-        .map(|e| e["event"].as_str().unwrap())
-        .collect();
-    assert_eq!(
-        names,
-        [
-            "fault_injected",
-            "process_died",
-            "process_restarted",
-            "process_ready"
-        ]
-    );
+    assert_eq!(events_of(&s, "F3/planner"), KILLED_AND_RESTARTED);
     assert_eq!(s["safety"]["collisions"], 0);
     assert_domain_clean(&run_id(&out));
 }
@@ -155,61 +129,57 @@ fn user_planner(body: &str) -> String {
     )
 }
 
+/// Runs `scenario` with `extra` in `dir`: the run fails, its error says
+/// every one of `needles`, and it leaves nothing behind.
+fn fails_naming(dir: &Path, scenario: &str, extra: &[&str], needles: &[&str]) {
+    let (o, out) = run(dir, scenario, extra);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        needles.iter().all(|n| err.contains(n)),
+        "{needles:?}: {err}"
+    );
+    assert_domain_clean(&run_id(&out));
+}
+
 #[test]
 fn a_user_program_that_crashes_hangs_or_writes_garbage_is_named_and_leaves_nothing_behind() {
     let tmp = tempfile::tempdir().unwrap();
     let scenario = small_scenario("byo", 10.0);
 
     // Crashes at start: the run's error names the process and its exit.
-    let dir = tmp.path().join("start");
-    std::fs::create_dir_all(&dir).unwrap();
     let flag = format!("planner@F1={} -c 'raise SystemExit(3)'", python3());
-    let (o, out) = run(&dir, &scenario, &["--replace", &flag]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
-    assert!(
-        err.contains("F1/planner") && err.contains("exit code 3"),
-        "{err}"
+    fails_naming(
+        &tmp.path().join("start"),
+        &scenario,
+        &["--replace", &flag],
+        &["F1/planner", "exit code 3"],
     );
-    assert_domain_clean(&run_id(&out));
 
     // Crashes mid-run, with a traceback in its log, which the error shows.
-    let dir = tmp.path().join("mid");
-    std::fs::create_dir_all(&dir).unwrap();
     let flag =
         user_planner("if step.sim_time_s > 2.0:\n    raise RuntimeError(\"my planner gave up\")");
-    let (o, out) = run(&dir, &scenario, &["--replace", &flag]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
-    assert!(
-        err.contains("F1/planner") && err.contains("my planner gave up"),
-        "{err}"
+    fails_naming(
+        &tmp.path().join("mid"),
+        &scenario,
+        &["--replace", &flag],
+        &["F1/planner", "my planner gave up"],
     );
-    assert_domain_clean(&run_id(&out));
 
     // Hangs inside a step: the tick timeout names it.
-    let dir = tmp.path().join("hang");
-    std::fs::create_dir_all(&dir).unwrap();
     let flag = user_planner("if step.sim_time_s > 1.0:\n    time.sleep(3600)");
-    let (o, out) = run(
-        &dir,
+    fails_naming(
+        &tmp.path().join("hang"),
         &scenario,
         &["--replace", &flag, "--tick-timeout", "2"],
+        &["no progress", "F1/planner"],
     );
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
-    assert!(
-        err.contains("no progress") && err.contains("F1/planner"),
-        "{err}"
-    );
-    assert_domain_clean(&run_id(&out));
 
     // Writes garbage (NaN, or more keep-out points than a setpoint holds,
     // past the package's own check): the controller rejects and counts
     // every such sample, the recording holds none, and the run goes on to
     // its end.
     let dir = tmp.path().join("nan");
-    std::fs::create_dir_all(&dir).unwrap();
     let flag = user_planner(
         "sp = msgs.Setpoint()\nsp.header.sim_time_ns = step.sim_time_ns\nif step.tick % 2:\n    sp.position_m[0] = math.nan\nelse:\n    sp.keepout_count = 99\nout._pub.send_copy(sp)",
     );
@@ -231,7 +201,6 @@ fn a_user_program_that_crashes_hangs_or_writes_garbage_is_named_and_leaves_nothi
 
     // A program that cannot be found is refused before anything starts.
     let dir = tmp.path().join("missing");
-    std::fs::create_dir_all(&dir).unwrap();
     let (o, out) = run(
         &dir,
         &scenario,

@@ -78,21 +78,9 @@ fn trial(i: u64) {
     assert!((summary["sim_time_s"].as_f64().unwrap() - DURATION_S).abs() < 1e-6);
 
     // The gap, in summary.json: fault, death, restart, ready — in that order.
-    let names: Vec<&str> = summary["events"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|e| e["process"] == label.as_str())
-        .map(|e| e["event"].as_str().unwrap())
-        .collect();
     assert_eq!(
-        names,
-        [
-            "fault_injected",
-            "process_died",
-            "process_restarted",
-            "process_ready"
-        ],
+        events_of(&summary, &label),
+        KILLED_AND_RESTARTED,
         "trial {i} ({label})"
     );
 

@@ -241,17 +241,23 @@ pub fn signal(pid: u32, sig: i32) {
 /// Python 3 with the third-party readers, or a failing assertion that says
 /// how to install them (tests never skip).
 pub fn python() -> Command {
+    Command::new(python_having(
+        "mcap, mcap_ros2",
+        "pip install -r tests/requirements.txt",
+    ))
+}
+
+/// The tests' Python 3 (`SHOAL_PYTHON`, default `python3`), asserted to
+/// import `modules` (`"a, b"`); a failing assertion says `install`.
+pub fn python_having(modules: &str, install: &str) -> String {
     let py = std::env::var("SHOAL_PYTHON").unwrap_or_else(|_| "python3".into());
     let ok = Command::new(&py)
-        .args(["-c", "import mcap, mcap_ros2"])
+        .args(["-c", &format!("import {modules}")])
         .status()
         .map(|s| s.success())
         .unwrap_or(false);
-    assert!(
-        ok,
-        "{py} with `mcap` and `mcap-ros2-support` is required: pip install -r tests/requirements.txt"
-    );
-    Command::new(py)
+    assert!(ok, "{py} that imports {modules} is required: {install}");
+    py
 }
 
 /// Runs one of `tests/python/`'s checkers with `args` and returns the JSON
@@ -289,6 +295,26 @@ pub fn u64s(v: &serde_json::Value) -> Vec<u64> {
         .map(|x| x.as_u64().unwrap_or_else(|| panic!("not a u64: {x}")))
         .collect()
 }
+
+/// What `summary.json` says happened to one process (`vehicle/kind`), in
+/// order.
+pub fn events_of<'a>(summary: &'a serde_json::Value, label: &str) -> Vec<&'a str> {
+    summary["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["process"] == label)
+        .map(|e| e["event"].as_str().unwrap())
+        .collect()
+}
+
+/// The events of a process killed by a fault and restarted, in order.
+pub const KILLED_AND_RESTARTED: [&str; 4] = [
+    "fault_injected",
+    "process_died",
+    "process_restarted",
+    "process_ready",
+];
 
 /// The `summary.json` of a finished run.
 pub fn summary(out: &Path) -> serde_json::Value {

@@ -14,10 +14,10 @@
 //! where a researcher puts their own.
 use anyhow::Context;
 use clap::Parser;
-use ipc_types::{Channel, LeaderPose, Nav, PlannerState, Sample, Setpoint, Sonar};
-use nalgebra::{Isometry3, Matrix6, Translation3, Vector3, Vector6};
-use planner::{FollowerInput, FollowerPlanner, PoseMeasurement, SonarScan};
-use shoal_runtime::convert::{arr, quat};
+use ipc_types::{Channel, LeaderPose, Nav, PlannerState, Setpoint, Sonar};
+use nalgebra::Vector6;
+use planner::{FollowerInput, FollowerPlanner, SonarScan};
+use shoal_runtime::convert::quat;
 use shoal_runtime::ports::Origin;
 use shoal_runtime::{ChannelLimits, Publisher, Runtime, StepContext, Subscriber, Task, TaskError};
 use shoal_scenario::Scenario;
@@ -72,16 +72,7 @@ impl Task for MyFollower {
         let mut origin = Origin::of(&nav.header);
         let pose = self.pose_in.latest(ctx)?.map(|p| {
             origin = origin.earliest(Origin::of(&p.header));
-            PoseMeasurement {
-                // the image's time: the fix is placed where the follower was then
-                t_s: p.header.origin_sim_time_ns as f64 * 1e-9,
-                parent_in_body: Isometry3::from_parts(
-                    Translation3::from(Vector3::from(p.parent_position_body_m)),
-                    quat(p.q_parent_to_body_wxyz),
-                ),
-                covariance: Matrix6::from_row_slice(&p.covariance),
-                valid: p.valid != 0,
-            }
+            planner::node::pose_measurement(&p)
         });
         let v = nav.velocity_body_mps;
         let w = nav.rates_body_radps;
@@ -96,25 +87,11 @@ impl Task for MyFollower {
                 sonar: sonar.as_ref().map(SonarScan::from_sample),
             })
             .map_err(TaskError::failed("my follower step"))?;
-        let mut sp = Setpoint::zeroed();
-        sp.position_m = arr(&out.target.position_m);
-        sp.velocity_mps = arr(&out.target.velocity_mps);
-        sp.yaw_rel_rad = out.target.yaw_rel_rad;
-        sp.mode = out.state.mode.into();
-        self.setpoint_out.publish(sp, ctx, origin)?;
-        let s = &out.state;
-        let known = |x: f64| if x.is_finite() { x } else { -1.0 };
-        let mut st = PlannerState::zeroed();
-        st.slot_nominal_m = arr(&s.slot_nominal_m);
-        st.slot_shifted_m = arr(&s.slot_shifted_m);
-        st.slot_filtered_m = arr(&s.slot_filtered_m);
-        st.delta_min_m = known(s.delta_min_m);
-        st.parent_age_s = known(s.parent_age_s);
-        st.waypoint_distance_m = known(s.waypoint_distance_m);
-        st.mode = s.mode.into();
-        st.parent_valid = u8::from(s.parent_estimate_valid);
-        st.avoiding = u8::from(s.avoiding);
-        self.state_out.publish(st, ctx, origin)?;
+        // What the controller flies, and what the summary reads the passage from.
+        self.setpoint_out
+            .publish(planner::node::setpoint_of(&out), ctx, origin)?;
+        self.state_out
+            .publish(planner::node::state_of(&out), ctx, origin)?;
         Ok(())
     }
 }

@@ -237,21 +237,7 @@ impl<S: Service> Task for PlannerTask<S> {
             Role::Follower { planner, pose_in } => {
                 let pose = pose_in.latest(ctx)?.map(|p| {
                     origin = origin.earliest(Origin::of(&p.header));
-                    let mut cov = Matrix6::zeros();
-                    for r in 0..6 {
-                        for c in 0..6 {
-                            cov[(r, c)] = p.covariance[6 * r + c];
-                        }
-                    }
-                    PoseMeasurement {
-                        t_s: p.header.origin_sim_time_ns as f64 * 1e-9,
-                        parent_in_body: Isometry3::from_parts(
-                            Translation3::from(Vector3::from(p.parent_position_body_m)),
-                            quat(p.q_parent_to_body_wxyz),
-                        ),
-                        covariance: cov,
-                        valid: p.valid != 0,
-                    }
+                    pose_measurement(&p)
                 });
                 planner
                     .step(&FollowerInput {
@@ -265,38 +251,57 @@ impl<S: Service> Task for PlannerTask<S> {
                     .map_err(TaskError::failed("follower planner step"))?
             }
         };
-        let mut sp = Setpoint::zeroed();
-        sp.position_m = arr(&out.target.position_m);
-        sp.velocity_mps = arr(&out.target.velocity_mps);
-        sp.yaw_rel_rad = out.target.yaw_rel_rad;
-        sp.mode = out.state.mode.into();
-        out.keepout.write_to(&mut sp);
-        self.setpoint_out.publish(sp, ctx, origin)?;
-
-        let s = &out.state;
-        let mut st = PlannerState::zeroed();
-        st.slot_nominal_m = arr(&s.slot_nominal_m);
-        st.slot_shifted_m = arr(&s.slot_shifted_m);
-        st.slot_filtered_m = arr(&s.slot_filtered_m);
-        st.delta_min_m = if s.delta_min_m.is_finite() {
-            s.delta_min_m
-        } else {
-            -1.0
-        };
-        st.parent_age_s = if s.parent_age_s.is_finite() {
-            s.parent_age_s
-        } else {
-            -1.0
-        };
-        st.waypoint_distance_m = if s.waypoint_distance_m.is_finite() {
-            s.waypoint_distance_m
-        } else {
-            -1.0
-        };
-        st.mode = s.mode.into();
-        st.parent_valid = u8::from(s.parent_estimate_valid);
-        st.avoiding = u8::from(s.avoiding);
-        self.state_out.publish(st, ctx, origin)?;
+        self.setpoint_out.publish(setpoint_of(&out), ctx, origin)?;
+        self.state_out.publish(state_of(&out), ctx, origin)?;
         Ok(())
     }
+}
+
+/// A parent fix as the planner takes it, from camera-pose's sample: the
+/// parent's pose in the follower's body frame at the image's time.
+pub fn pose_measurement(p: &LeaderPose) -> PoseMeasurement {
+    let mut cov = Matrix6::zeros();
+    for r in 0..6 {
+        for c in 0..6 {
+            cov[(r, c)] = p.covariance[6 * r + c];
+        }
+    }
+    PoseMeasurement {
+        t_s: p.header.origin_sim_time_ns as f64 * 1e-9,
+        parent_in_body: Isometry3::from_parts(
+            Translation3::from(Vector3::from(p.parent_position_body_m)),
+            quat(p.q_parent_to_body_wxyz),
+        ),
+        covariance: cov,
+        valid: p.valid != 0,
+    }
+}
+
+/// The setpoint a planner's output hands the controller (target, mode,
+/// and what the safety layer keeps clear of).
+pub fn setpoint_of(out: &PlannerOutput) -> Setpoint {
+    let mut sp = Setpoint::zeroed();
+    sp.position_m = arr(&out.target.position_m);
+    sp.velocity_mps = arr(&out.target.velocity_mps);
+    sp.yaw_rel_rad = out.target.yaw_rel_rad;
+    sp.mode = out.state.mode.into();
+    out.keepout.write_to(&mut sp);
+    sp
+}
+
+/// The `planner_state` sample of a planner's output (an unknown figure -1).
+pub fn state_of(out: &PlannerOutput) -> PlannerState {
+    let s = &out.state;
+    let known = |x: f64| if x.is_finite() { x } else { -1.0 };
+    let mut st = PlannerState::zeroed();
+    st.slot_nominal_m = arr(&s.slot_nominal_m);
+    st.slot_shifted_m = arr(&s.slot_shifted_m);
+    st.slot_filtered_m = arr(&s.slot_filtered_m);
+    st.delta_min_m = known(s.delta_min_m);
+    st.parent_age_s = known(s.parent_age_s);
+    st.waypoint_distance_m = known(s.waypoint_distance_m);
+    st.mode = s.mode.into();
+    st.parent_valid = u8::from(s.parent_estimate_valid);
+    st.avoiding = u8::from(s.avoiding);
+    st
 }
