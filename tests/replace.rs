@@ -1,7 +1,8 @@
 //! A vehicle's process replaced by the user's own program (`[[replace]]`,
 //! `--replace`), with real processes: the paper's follower planner written
 //! in Python (examples/python/paper_follower.py, on the shoal_node package)
-//! flies the paper scenario in lockstep, in realtime and through a restart;
+//! flies the paper scenario in lockstep (and re-runs on its recorded inputs
+//! with no difference), in realtime and through a restart;
 //! a user program that crashes, hangs or writes garbage is named in the
 //! run's error (or its counts) and leaves nothing behind.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
@@ -83,6 +84,22 @@ fn the_paper_with_python_follower_planners_passes_in_lockstep() {
     assert_eq!(s["samples_rejected"]["setpoint"], 0);
     assert_eq!(s["samples_lost"]["setpoint"], 0);
     assert_domain_clean(&run_id(&out));
+    // Re-run on its recorded inputs, the user's planner (the recording's
+    // scenario names it) gives the same outputs: it is deterministic too.
+    let rec = out.join("recording.mcap");
+    let o = run_shoal_ok(&[
+        "replay",
+        rec.to_str().unwrap(),
+        "--rerun",
+        "planner",
+        "--vehicle",
+        "F3",
+    ]);
+    let said = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    assert!(
+        said.contains("F3/planner: no differences over 2000 steps"),
+        "{said}"
+    );
 }
 
 #[test]

@@ -389,10 +389,6 @@ pub fn rerun(rec: &Recording, opts: &RerunOptions) -> anyhow::Result<RerunReport
         .with_context(|| format!("no process {kind_name} of vehicle {vehicle} in the scenario"))?;
     spec.index = 0;
     let bin_dir = crate::launch::bin_dir_or_default(opts.bin_dir.clone())?;
-    let binary = bin_dir.join(kind.binary());
-    if !binary.is_file() {
-        bail!("service binary {} not found", binary.display());
-    }
 
     let run_id = sys::random_id();
     let dir = std::env::temp_dir().join(format!("shoal-rerun-{run_id}"));
@@ -417,6 +413,11 @@ pub fn rerun(rec: &Recording, opts: &RerunOptions) -> anyhow::Result<RerunReport
         scenario: scenario.clone(),
         scope: None,
     };
+    // shoal's binary, or the user's command the recorded run replaced it by.
+    let binary = launch.binary(&spec);
+    if sys::find_program(&binary.to_string_lossy()).is_none() {
+        bail!("{} not found", binary.display());
+    }
     let result = drive(rec, &scenario, &spec, &run_id, &mut ports, &mut sup, || {
         (
             binary.clone(),
