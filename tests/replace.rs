@@ -243,7 +243,10 @@ fn the_campaign_runs_a_users_method_and_names_it() {
             .join("examples/python/paper_follower.py")
             .display()
     );
-    let o = run_shoal(&[
+    // The paper's method as published (shoal's planner) over the same
+    // courses first, to be shown beside the user's.
+    let theirs = tmp.path().join("published");
+    let course = [
         "campaign",
         "--families",
         "gate,turn",
@@ -251,11 +254,26 @@ fn the_campaign_runs_a_users_method_and_names_it() {
         "2",
         "--published",
         "--quiet",
+    ];
+    let mut args = course.to_vec();
+    args.extend(["--out", theirs.to_str().unwrap()]);
+    let o = run_shoal(&args);
+    assert!(
+        matches!(o.status.code(), Some(0 | 3)),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let beside = theirs.join("campaign.json");
+    let mut args = course.to_vec();
+    args.extend([
         "--replace",
         &flag,
+        "--beside",
+        beside.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
     ]);
+    let o = run_shoal(&args);
     let said = String::from_utf8_lossy(&o.stdout).to_string();
     // A failing run is the method's result, not the campaign's error.
     assert!(
@@ -272,6 +290,28 @@ fn the_campaign_runs_a_users_method_and_names_it() {
         "{method}"
     );
     assert!(said.contains(method), "the table names the method: {said}");
+    // The published campaign's pass counts stand beside the user's, per
+    // family and over all.
+    let published: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&beside).unwrap()).unwrap();
+    assert!(
+        said.contains(&format!("| family | {method} | published |")),
+        "{said}"
+    );
+    for (own, theirs) in r["by_family"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(published["by_family"].as_array().unwrap())
+    {
+        let cell = |t: &serde_json::Value| format!("{}/{}", t["passed"], t["runs"]);
+        let line = format!("| {} | {} (", own["family"].as_str().unwrap(), cell(own));
+        let row = said
+            .lines()
+            .find(|l| l.starts_with(&line))
+            .unwrap_or_else(|| panic!("no row {line}: {said}"));
+        assert!(row.contains(&format!("| {} (", cell(theirs))), "{row}");
+    }
     let runs = r["runs"].as_array().unwrap();
     assert_eq!(runs.len(), 2);
     for run in runs {
@@ -308,4 +348,52 @@ fn an_out_of_tree_rust_follower_takes_the_planners_place_and_passes() {
     let effective = std::fs::read_to_string(out.join("logs/effective-scenario.toml")).unwrap();
     assert!(effective.contains("my-follower"), "{effective}");
     assert_domain_clean(&run_id(&out));
+}
+
+#[test]
+fn compare_puts_a_users_method_beside_the_papers_and_shoals() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("cmp");
+    let flag = format!(
+        "planner@followers={} {}",
+        python3(),
+        repo_root()
+            .join("examples/python/paper_follower.py")
+            .display()
+    );
+    let o = run_shoal(&[
+        "compare",
+        "--quiet",
+        "--replace",
+        &flag,
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("compare.json")).unwrap()).unwrap();
+    let names: Vec<&str> = rows
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["variant"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "method",
+            "published",
+            "acoustic",
+            "no_vertical_shift",
+            "yours"
+        ]
+    );
+    // Yours flew the user's planner: its run's scenario names it, and it
+    // passes the paper as the published method does.
+    let scenario = std::fs::read_to_string(out.join("yours/scenario.toml")).unwrap();
+    assert!(scenario.contains("paper_follower.py"), "{scenario}");
+    let yours = &rows[4];
+    assert_eq!(yours["pass"], true, "{yours}");
+    let md = std::fs::read_to_string(out.join("compare.md")).unwrap();
+    assert!(md.contains("vs yours (planner → `"), "{md}");
 }

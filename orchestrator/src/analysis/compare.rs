@@ -11,6 +11,9 @@
 //!   limit is raised to two packet periods so they do not give up between
 //!   packets — the baseline gets a fair chance.
 //! - **no_vertical_shift**: the ablation D_b = 0.
+//! - **yours** (with `--replace`): the scenario as given with the user's own
+//!   program in place of the processes it names: their method beside the
+//!   paper's and shoal's.
 //!
 //! Fix fractions count the follower's `leader_pose` samples that carry a
 //! fix; the modem publishes only when a packet arrives (so its fraction is
@@ -23,8 +26,13 @@ use shoal_scenario::{Perception, Scenario};
 
 use super::summary::{fmt_or_na, min_value, Summary};
 
-/// The variants, in table order.
-pub fn variants(base: &Scenario) -> anyhow::Result<Vec<(&'static str, Scenario)>> {
+/// The variants, in table order; with `yours` (the user's `--replace`
+/// entries), a last one, `yours`: the scenario with those processes
+/// replaced.
+pub fn variants(
+    base: &Scenario,
+    yours: &[shoal_scenario::replace::Replace],
+) -> anyhow::Result<Vec<(&'static str, Scenario)>> {
     let method = base.clone();
     let mut acoustic = base.clone();
     acoustic.method.perception = Perception::Acoustic;
@@ -39,18 +47,25 @@ pub fn variants(base: &Scenario) -> anyhow::Result<Vec<(&'static str, Scenario)>
     ablation.method.vertical_shift = false;
     let mut published = base.clone();
     published.method.generalised = false;
-    Ok(vec![
+    let mut out = vec![
         ("method", method),
         ("published", published),
         ("acoustic", acoustic),
         ("no_vertical_shift", ablation),
-    ])
+    ];
+    if !yours.is_empty() {
+        let mut mine = base.clone();
+        mine.replace.extend(yours.iter().cloned());
+        mine.validate()?;
+        out.push(("yours", mine));
+    }
+    Ok(out)
 }
 
 /// One row of the comparison table.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Row {
-    /// `method`, `published`, `acoustic` or `no_vertical_shift`.
+    /// `method`, `published`, `acoustic`, `no_vertical_shift` or `yours`.
     pub variant: String,
     /// RMS slot error before the passage, m.
     pub slot_error_rms_before_m: Option<f64>,

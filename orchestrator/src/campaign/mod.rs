@@ -21,7 +21,7 @@
 //! `summary.json` is not run again. Ctrl-C stops the runs under way (their
 //! rows say `interrupted`) and writes the report of those finished.
 
-mod report;
+pub mod report;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -80,6 +80,8 @@ pub struct CampaignOptions {
     pub first_course_seed: u64,
     /// `--replace` flags every run gets: the user's own method.
     pub replace: Vec<String>,
+    /// Earlier campaigns shown beside this one (`--beside`).
+    pub beside: Vec<report::Beside>,
 }
 
 /// One run of the campaign.
@@ -533,6 +535,7 @@ mod tests {
             shoal: PathBuf::from("shoal"),
             bin_dir: None,
             replace: Vec::new(),
+            beside: Vec::new(),
             keep_recordings: false,
             quiet: true,
             published: false,

@@ -102,8 +102,57 @@ pub struct Report {
     /// published) or the user's `--replace` flags.
     #[serde(default)]
     pub method: String,
+    /// Earlier campaigns' tallies shown beside this one's (`--beside`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub beside: Vec<Beside>,
     /// Every run, in order.
     pub runs: Vec<RunRow>,
+}
+
+/// Another campaign's pass rates, shown beside a campaign's own (the same
+/// courses flown by another method).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Beside {
+    /// Its method, as its report names it.
+    pub method: String,
+    /// Where its report is.
+    pub path: String,
+    /// Its tallies per family, then over every run.
+    pub tallies: Vec<Tally>,
+}
+
+impl Beside {
+    /// Reads an earlier campaign's `campaign.json`.
+    pub fn read(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        let r: Report = serde_json::from_str(&text)
+            .with_context(|| format!("{} is not a campaign report", path.display()))?;
+        let mut tallies = r.by_family;
+        tallies.push(r.overall);
+        Ok(Self {
+            method: if r.method.is_empty() {
+                "shoal".into()
+            } else {
+                r.method
+            },
+            path: path.display().to_string(),
+            tallies,
+        })
+    }
+}
+
+/// A pass count and rate as the tables show it.
+fn pass_cell(t: Option<&Tally>) -> String {
+    t.map_or("–".to_string(), |t| {
+        format!(
+            "{}/{} ({})",
+            t.passed,
+            t.runs,
+            t.pass_rate
+                .map_or("n/a".to_string(), |r| format!("{:.1} %", 100.0 * r))
+        )
+    })
 }
 
 /// The method a campaign's runs fly, in words.
@@ -178,6 +227,7 @@ impl Report {
                 .filter(|r| r.status == Status::Interrupted)
                 .count(),
             method: method_of(o),
+            beside: o.beside.clone(),
             runs: rows,
         }
     }
@@ -221,6 +271,25 @@ impl Report {
             "family",
             self.by_family.iter().chain(std::iter::once(&self.overall)),
         );
+        if !self.beside.is_empty() {
+            let _ = writeln!(
+                t,
+                "\nBeside it, the same courses flown by other methods (passed/runs):\n"
+            );
+            let _ = write!(t, "| family | {} |", self.method);
+            for b in &self.beside {
+                let _ = write!(t, " {} |", b.method);
+            }
+            let _ = writeln!(t, "\n|---|---|{}", "---|".repeat(self.beside.len()));
+            for own in self.by_family.iter().chain(std::iter::once(&self.overall)) {
+                let _ = write!(t, "| {} | {} |", own.family, pass_cell(Some(own)));
+                for b in &self.beside {
+                    let theirs = b.tallies.iter().find(|x| x.family == own.family);
+                    let _ = write!(t, " {} |", pass_cell(theirs));
+                }
+                let _ = writeln!(t);
+            }
+        }
         for (label, tallies) in [
             ("kind of feature", &self.by_feature),
             ("group size", &self.by_size),

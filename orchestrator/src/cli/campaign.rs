@@ -78,6 +78,11 @@ pub struct CampaignCmd {
     /// the report names it. Repeatable.
     #[arg(long, value_name = "PROCESS[@VEHICLES]=COMMAND", value_parser = check_replace)]
     replace: Vec<String>,
+    /// Show the pass rates of earlier campaigns over the same courses (their
+    /// campaign.json) beside this one's, a column per method: yours beside
+    /// the paper's (--published) and shoal's. Repeatable.
+    #[arg(long, value_name = "CAMPAIGN.JSON")]
+    beside: Vec<PathBuf>,
 }
 
 /// A `--replace` flag as given, once `shoal run` would take it.
@@ -125,6 +130,11 @@ pub fn run(cmd: CampaignCmd) -> anyhow::Result<()> {
         space: cmd.space,
         first_course_seed: cmd.first_course_seed,
         replace: cmd.replace.clone(),
+        beside: cmd
+            .beside
+            .iter()
+            .map(|p| crate::campaign::report::Beside::read(p))
+            .collect::<anyhow::Result<_>>()?,
     };
     let report = campaign::run(&o)?;
     print!("{}", report.markdown());

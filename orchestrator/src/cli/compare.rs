@@ -26,6 +26,11 @@ pub struct CompareCmd {
     /// No progress bars.
     #[arg(long, short)]
     quiet: bool,
+    /// Add a variant `yours`: the scenario with your own program in place of
+    /// a process, PROCESS[@VEHICLES]=COMMAND as `shoal run --replace` takes
+    /// it (repeatable).
+    #[arg(long, value_name = "PROCESS[@VEHICLES]=COMMAND", value_parser = super::run::parse_replace)]
+    replace: Vec<shoal_scenario::replace::Replace>,
 }
 
 /// Runs every variant into OUT/<variant>/ and writes compare.md, .json, .png.
@@ -45,7 +50,7 @@ pub fn run(cmd: CompareCmd) -> anyhow::Result<()> {
     let settings = RunSettings::new(Mode::Lockstep, cmd.bin_dir, cmd.quiet, 30.0)?;
     let mut rows = Vec::new();
     let mut runs = Vec::new();
-    for (name, scenario) in variants(&base)? {
+    for (name, scenario) in variants(&base, &cmd.replace)? {
         eprintln!("== {name}");
         let done = pipeline::run_and_summarize(scenario, &out.join(name), &settings)
             .with_context(|| format!("variant {name}"))?;
@@ -57,8 +62,18 @@ pub fn run(cmd: CompareCmd) -> anyhow::Result<()> {
         .map(|(n, d)| (*n, &d.scenario, &d.recording))
         .collect();
     plots::write_compare_plot(&refs, &out).context("writing the comparison plot")?;
+    let yours = if cmd.replace.is_empty() {
+        String::new()
+    } else {
+        let list: Vec<String> = cmd
+            .replace
+            .iter()
+            .map(|r| format!("{} → `{}`", r.process.name(), r.command.join(" ")))
+            .collect();
+        format!(" vs yours ({})", list.join(", "))
+    };
     let md = format!(
-        "# {} (seed {}): method vs as published vs acoustic baseline vs no vertical shift\n\nsafe distance {} m\n\n{}",
+        "# {} (seed {}): method vs as published vs acoustic baseline vs no vertical shift{yours}\n\nsafe distance {} m\n\n{}",
         base.name,
         base.seed,
         base.safety.safe_distance_m,
