@@ -270,6 +270,13 @@ fn a_dataflow_run_steps_each_stage_on_its_inputs_and_counts_the_deadlines_it_mis
     let s = summary(&out);
     assert_eq!(s["mode"], "dataflow");
     assert_chain_stages(&s);
+    // Every process ended on the run's SIGTERM as it should, its statistics
+    // written: also the stages woken only by their inputs (once killed by
+    // it on the spot, before iceoryx2's handler was installed).
+    for kind in PROCESS_KINDS {
+        let n = s["step_us"][kind]["count"].as_u64().unwrap_or(0);
+        assert!(n > 0, "no statistics of {kind}: {}", s["step_us"]);
+    }
     // The plant steps on its 10 Hz clock and again on each thrust, which it
     // applies when it comes: about twice its clock's 3 × 80 activations.
     let plant_steps = s["step_us"]["sim-plant"]["count"].as_u64().unwrap();

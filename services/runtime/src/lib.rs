@@ -779,6 +779,11 @@ impl<S: Service> Runtime<S> {
         iceoryx2::port::listener::Listener<S>: SynchronousMultiplexing,
     {
         let done = self.done_notifier()?;
+        // The first read installs iceoryx2's SIGINT/SIGTERM handlers, as in
+        // lockstep: a process woken only by its inputs may never reach a
+        // timed-out wait, and without them SIGTERM would end it on the spot,
+        // its task unfinished and its statistics unwritten.
+        let _ = SignalHandler::termination_requested();
         self.notify_ready(&done)?;
         let mut sched = self.schedule();
         let triggers = self.triggers.borrow();
@@ -800,6 +805,9 @@ impl<S: Service> Runtime<S> {
         let mut started = false;
         let mut stepper = self.stepper(task, stats, report);
         loop {
+            if SignalHandler::termination_requested() {
+                break;
+            }
             let due = sched.due();
             let now = mono_ns();
             if now >= due {
