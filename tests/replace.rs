@@ -103,7 +103,7 @@ fn the_paper_with_python_follower_planners_passes_in_lockstep() {
 }
 
 #[test]
-fn python_follower_planners_run_in_realtime_and_through_a_restart() {
+fn python_follower_planners_run_in_realtime_in_dataflow_and_through_a_restart() {
     let tmp = tempfile::tempdir().unwrap();
     // Realtime: the Python node keeps its phased timer.
     let rt = tmp.path().join("rt");
@@ -116,6 +116,28 @@ fn python_follower_planners_run_in_realtime_and_through_a_restart() {
     let s = summary(&out);
     assert_planners_stepped(&s, 50);
     assert_eq!(s["safety"]["collisions"], 0);
+    assert_domain_clean(&run_id(&out));
+
+    // Dataflow: the Python planner steps on the arrivals of its frame's
+    // sonar scan and parent fix (iceoryx2 events, as shoal's planner), and
+    // announces its setpoints to the controller.
+    let df = tmp.path().join("df");
+    let (o, out) = run(
+        &df,
+        &paper_python(),
+        &["--mode", "dataflow", "--duration", "6"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = summary(&out);
+    // Four Python planners at 10 Hz once their first inputs came.
+    let steps = s["step_us"]["planner"]["count"].as_u64().unwrap();
+    assert!(steps >= 4 * 40, "planner steps: {}", s["step_us"]);
+    assert_eq!(s["samples_rejected"]["setpoint"], 0);
+    let log = std::fs::read_to_string(out.join("logs/F1.planner.log")).unwrap();
+    assert!(
+        log.contains("F1/planner: dataflow, stepping on the arrivals of sonar, leader_pose"),
+        "{log}"
+    );
     assert_domain_clean(&run_id(&out));
 
     // Killed (SIGKILL) at 30 s, restarted with --restart 1, joined again.

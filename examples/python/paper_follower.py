@@ -715,9 +715,14 @@ def main() -> int:
         return 2
     planner = PaperFollower(config_from_scenario(node.scenario, node.vehicle))
 
+    # In a dataflow run the planner steps once its frame's sonar scan and (with the camera)
+    # parent fix are in, as shoal's planner does; nav is read as it stands.
+    camera = node.scenario.get("method", {}).get("perception", "camera") == "camera"
     nav_in = node.subscriber("nav")
-    sonar_in = node.subscriber("sonar")
-    pose_in = node.subscriber("leader_pose")
+    sonar_in = node.subscriber("sonar", trigger=node.rate_hz("sonar") == node.rate_hz("planner"))
+    pose_in = node.subscriber(
+        "leader_pose", trigger=camera and node.rate_hz("camera-pose") == node.rate_hz("planner")
+    )
     sp_out = node.publisher("setpoint")
     st_out = node.publisher("planner_state")
 

@@ -342,6 +342,9 @@ RUN_CHANNELS = {
 DONE_SERVICE = "shoal/{run_id}/done"
 READY_ID = (1, 1)
 
+# Dataflow: the event a publisher notifies after each send on a service (format with service).
+ARRIVAL_SERVICE = "{service}/arrived"
+
 # Limits: every per-vehicle channel's; a camera frame's; the world's and the stats'
 # as (base, per vehicle) and (base, per process).
 VEHICLE_LIMITS = Limits(max_publishers=2, max_subscribers=9, max_nodes=11, max_buffer=16, history=1)

@@ -9,9 +9,13 @@ the step loop with the Rust runtime's contract:
   exists (the `done` event's ready id), so the first tick's samples reach it;
 - lockstep: it sleeps on its doorbell slot, yields one `Step` per wake-up,
   and tells the orchestrator the step is over when the loop's body returns;
-- realtime (and dataflow, which takes its phased timer: a Python process is
-  not woken by arrivals) on phased activations of the wall clock, counting
-  the ones it missed;
+- realtime: on phased activations of the wall clock, counting the ones it
+  missed;
+- dataflow: it steps once a new sample has arrived on every trigger input
+  (`node.subscriber(..., trigger=True)`; iceoryx2 arrival events, as the
+  Rust runtime's `wake_on`), its phased timer a deadline at which it steps
+  with what it has and counts a miss; every publisher announces its sends,
+  so the stages after it wake on them; with no trigger it keeps its timer;
 - SIGINT or SIGTERM ends the loop after the step in progress; statistics
   are published on the run's `stats` channel every simulated second and
   written to the stats file at exit, which `summary.json` merges.
@@ -176,11 +180,15 @@ class Subscriber:
     lockstep a sample is ready at a step when it was stamped before the
     step's tick; later ones are held for the next step."""
 
-    def __init__(self, node: "Node", service: str, cls, limits: c.Limits, buffer: int, kind: str):
+    def __init__(self, node: "Node", service: str, cls, limits: c.Limits, buffer: int, kind: str, trigger: bool = False):
         self.service = service
         self._cls = cls
         self._lockstep = node.mode == "lockstep"
         port = node._open(service, cls, limits)
+        if trigger and node.mode == "dataflow":
+            arrival = node._arrival(service, limits)
+            node._triggers.append(arrival.listener_builder().create())
+            node._trigger_names.append(kind)
         self._sub = port.subscriber_builder().buffer_size(max(1, min(buffer, limits.max_buffer))).create()
         self._held: list = []
         self._next_seq: dict[str, int] = {}
@@ -234,6 +242,10 @@ class Publisher:
         self._cls = cls
         self._pub = node._open(service, cls, limits).publisher_builder().create()
         self._seq = 0
+        # Dataflow: every send is announced, so the stages it triggers wake.
+        self._arrival = None
+        if node.mode == "dataflow":
+            self._arrival = node._arrival(service, limits).notifier_builder().create()
 
     def publish(self, sample, step: Step, origin: Origin = Origin()) -> None:
         """Stamps `sample`'s header (sequence, the step's simulated time, the
@@ -252,6 +264,8 @@ class Publisher:
         h.publish_mono_ns = time.monotonic_ns()
         self._pub.send_copy(sample)
         self._seq += 1
+        if self._arrival is not None:
+            self._arrival.notify()
 
 
 def _arguments(argv: Optional[list[str]]) -> argparse.Namespace:
@@ -316,6 +330,8 @@ class Node:
             .create(iox2.ServiceType.Ipc)
         )
         self._ports: list = []
+        self._triggers: list = []
+        self._trigger_names: list[str] = []
         self._hops = _Hops()
         self.steps_taken = 0
         self.deadline_misses = 0
@@ -355,16 +371,46 @@ class Node:
                 time.sleep(0.01)
         raise RuntimeError(f"cannot open {service}: {last!r}")
 
+    def _arrival(self, service: str, limits: c.Limits):
+        """The arrival event of pub-sub `service` (dataflow), as the Rust
+        runtime's `open_arrival` opens it."""
+        name = iox2.ServiceName.new(c.ARRIVAL_SERVICE.format(service=service))
+        last = None
+        for _ in range(200):
+            try:
+                port = (
+                    self._node.service_builder(name)
+                    .event()
+                    .max_notifiers(limits.max_publishers)
+                    .max_listeners(limits.max_subscribers)
+                    .max_nodes(limits.max_nodes)
+                    .event_id_max_value(0)
+                    .open_or_create()
+                )
+                self._ports.append(port)
+                return port
+            except Exception as e:  # noqa: BLE001 - half-created by another process: retry
+                last = e
+                time.sleep(0.01)
+        raise RuntimeError(f"cannot open {service}'s arrival event: {last!r}")
+
     def _channel(self, channel: str, vehicle: Optional[str]):
         if channel not in c.CHANNELS:
             raise KeyError(f"no channel `{channel}`; one of {', '.join(c.CHANNELS)}")
         cls, fmt = c.CHANNELS[channel]
         return cls, fmt.format(run_id=self.run_id, vehicle=vehicle or self.vehicle)
 
-    def subscriber(self, channel: str, buffer: int = 4) -> Subscriber:
-        """A subscriber of this vehicle's `channel` (`nav`, `sonar`, ...)."""
+    def subscriber(self, channel: str, buffer: int = 4, trigger: bool = False) -> Subscriber:
+        """A subscriber of this vehicle's `channel` (`nav`, `sonar`, ...).
+        With `trigger`, a dataflow run steps this process once a new sample
+        has arrived on every trigger input (nothing in the other modes)."""
         cls, service = self._channel(channel, None)
-        return Subscriber(self, service, cls, c.VEHICLE_LIMITS, buffer, channel)
+        return Subscriber(self, service, cls, c.VEHICLE_LIMITS, buffer, channel, trigger)
+
+    def rate_hz(self, process: str) -> float:
+        """The scenario's rate of a process kind (`planner`, `sonar`, ...), Hz."""
+        key = {"sim-plant": "plant", "camera-pose": "camera", "camera-sim": "camera"}.get(process, process)
+        return float(self.scenario["rates"][f"{key}_hz"])
 
     def world(self, buffer: int = 4) -> Subscriber:
         """A subscriber of the run's world snapshot (what a sonar or camera reads)."""
@@ -396,6 +442,8 @@ class Node:
         try:
             if self.mode == "lockstep":
                 yield from self._lockstep()
+            elif self.mode == "dataflow" and self._triggers:
+                yield from self._dataflow()
             else:
                 yield from self._realtime()
         finally:
@@ -464,6 +512,63 @@ class Node:
             yield step
             self._after(step)
             k += 1
+
+    def _dataflow(self) -> Iterator[Step]:
+        period = max(int(round(self.args.period_s * 1e9)), 100_000)
+        phase = max(int(round(self.args.phase_s * 1e9)), 0)
+        epoch = self.args.epoch_mono_ns or time.monotonic_ns()
+        k = 0
+        if self.args.restart > 0:
+            k = max(0, -(-(time.monotonic_ns() - epoch - phase) // period))
+        waitset = (
+            iox2.WaitSetBuilder.new()
+            .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
+            .create(iox2.ServiceType.Ipc)
+        )
+        guards = [waitset.attach_notification(t) for t in self._triggers]
+        print(
+            f"shoal_node: {self.vehicle}/{self.process}: dataflow, stepping on the arrivals of "
+            f"{', '.join(self._trigger_names)} (deadline every {period / 1e6:g} ms)",
+            file=sys.stderr,
+        )
+        self._notify_ready()
+        self._next_stats_ns = c.STATS_EVERY_NS
+        pending = [False] * len(self._triggers)
+        started = False  # no miss is counted before the first input arrived
+        last_sim = 0
+        while not _STOP:
+            due = epoch + phase + k * period
+            now = time.monotonic_ns()
+            if now >= due:
+                # The deadline: step with what there is, and count the miss.
+                skipped = (now - due) // period
+                k += skipped
+                tick, k = k, k + 1
+                if started:
+                    self.deadline_misses += skipped + 1
+                self._wake_late.record(now - (epoch + tick * period + phase))
+                last_sim = max(last_sim, tick * period + phase)
+                step = Step(tick, last_sim, False, now)
+                yield step
+                self._after(step)
+                continue
+            waitset.wait_and_process_with_timeout(iox2.Duration.from_nanos(due - now))
+            for i, t in enumerate(self._triggers):
+                if t.try_wait():
+                    pending[i] = True
+            if all(pending):
+                pending = [False] * len(pending)
+                started = True
+                now = time.monotonic_ns()
+                # This step stands for the frame whose activation is the
+                # first due after now: the next one due is the frame after.
+                first_after = -(-(now + 1 - epoch - phase) // period)
+                k = max(k, first_after + 1)
+                last_sim = max(last_sim, now - epoch)
+                step = Step(k, last_sim, False, now)
+                yield step
+                self._after(step)
+        del guards
 
     def _stats_sample(self):
         cls = c.RUN_CHANNELS["stats"][0]

@@ -20,8 +20,8 @@ use ipc_types::{
 
 use crate::domain::{domain_prefix, domain_root, ChannelLimits, EXPIRED_CONNECTIONS};
 use crate::doorbell::{doorbell_name, LAYOUT};
-use crate::ready_event_id;
 use crate::stats::{stats_dir, stats_limits, PUBLISH_EVERY_NS};
+use crate::{arrival_service_name, ready_event_id};
 
 /// The ctypes name of a ros2msg primitive (every one `ipc-types` has; any
 /// other would make the module fail at import, naming it).
@@ -181,6 +181,12 @@ pub fn contract_module() -> String {
         run_service_name("{run_id}", RunChannel::Done),
         ready_event_id(1, 0),
         ready_event_id(0, 1),
+    );
+    let _ = writeln!(
+        m,
+        "# Dataflow: the event a publisher notifies after each send on a service (format with service).\n\
+         ARRIVAL_SERVICE = \"{}\"\n",
+        arrival_service_name("{service}"),
     );
     let _ = writeln!(
         m,
