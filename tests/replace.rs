@@ -17,6 +17,17 @@ fn python3() -> String {
     python_having("shoal_node, numpy", "pip install -e ./python numpy")
 }
 
+/// `--replace` of every follower's planner by the Python example.
+fn python_planner_flag() -> String {
+    format!(
+        "planner@followers={} {}",
+        python3(),
+        repo_root()
+            .join("examples/python/paper_follower.py")
+            .display()
+    )
+}
+
 /// The paper scenario with its followers' planner the Python example.
 fn paper_python() -> String {
     let text = std::fs::read_to_string(repo_root().join("scenarios/paper-python.toml")).unwrap();
@@ -258,13 +269,7 @@ fn a_user_program_that_crashes_hangs_or_writes_garbage_is_named_and_leaves_nothi
 fn the_campaign_runs_a_users_method_and_names_it() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("c");
-    let flag = format!(
-        "planner@followers={} {}",
-        python3(),
-        repo_root()
-            .join("examples/python/paper_follower.py")
-            .display()
-    );
+    let flag = python_planner_flag();
     // The paper's method as published (shoal's planner) over the same
     // courses first, to be shown beside the user's.
     let theirs = tmp.path().join("published");
@@ -376,13 +381,7 @@ fn an_out_of_tree_rust_follower_takes_the_planners_place_and_passes() {
 fn compare_puts_a_users_method_beside_the_papers_and_shoals() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("cmp");
-    let flag = format!(
-        "planner@followers={} {}",
-        python3(),
-        repo_root()
-            .join("examples/python/paper_follower.py")
-            .display()
-    );
+    let flag = python_planner_flag();
     let o = run_shoal(&[
         "compare",
         "--quiet",

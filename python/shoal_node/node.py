@@ -347,52 +347,52 @@ class Node:
             print(f"shoal_node: no stats channel ({e}); statistics go to the exit file only", file=sys.stderr)
             self._stats = None
 
-    def _open(self, service: str, cls, limits: c.Limits):
-        name = iox2.ServiceName.new(service)
+    def _retrying(self, what: str, build):
+        """`build()` (an `open_or_create`) until it succeeds: two processes
+        opening a new service at once race inside it, as in the Rust
+        runtime's `open_retrying`; the port factory is kept while the node
+        lives."""
         last = None
         for _ in range(200):
             try:
-                port = (
-                    self._node.service_builder(name)
-                    .publish_subscribe(cls)
-                    .max_publishers(limits.max_publishers)
-                    .max_subscribers(limits.max_subscribers)
-                    .max_nodes(limits.max_nodes)
-                    .subscriber_max_buffer_size(limits.max_buffer)
-                    .history_size(limits.history)
-                    .subscriber_max_borrowed_samples(2)
-                    .enable_safe_overflow(True)
-                    .open_or_create()
-                )
+                port = build()
                 self._ports.append(port)
                 return port
             except Exception as e:  # noqa: BLE001 - half-created by another process: retry
                 last = e
                 time.sleep(0.01)
-        raise RuntimeError(f"cannot open {service}: {last!r}")
+        raise RuntimeError(f"cannot open {what}: {last!r}")
+
+    def _open(self, service: str, cls, limits: c.Limits):
+        name = iox2.ServiceName.new(service)
+        return self._retrying(
+            service,
+            lambda: self._node.service_builder(name)
+            .publish_subscribe(cls)
+            .max_publishers(limits.max_publishers)
+            .max_subscribers(limits.max_subscribers)
+            .max_nodes(limits.max_nodes)
+            .subscriber_max_buffer_size(limits.max_buffer)
+            .history_size(limits.history)
+            .subscriber_max_borrowed_samples(2)
+            .enable_safe_overflow(True)
+            .open_or_create(),
+        )
 
     def _arrival(self, service: str, limits: c.Limits):
         """The arrival event of pub-sub `service` (dataflow), as the Rust
         runtime's `open_arrival` opens it."""
         name = iox2.ServiceName.new(c.ARRIVAL_SERVICE.format(service=service))
-        last = None
-        for _ in range(200):
-            try:
-                port = (
-                    self._node.service_builder(name)
-                    .event()
-                    .max_notifiers(limits.max_publishers)
-                    .max_listeners(limits.max_subscribers)
-                    .max_nodes(limits.max_nodes)
-                    .event_id_max_value(0)
-                    .open_or_create()
-                )
-                self._ports.append(port)
-                return port
-            except Exception as e:  # noqa: BLE001 - half-created by another process: retry
-                last = e
-                time.sleep(0.01)
-        raise RuntimeError(f"cannot open {service}'s arrival event: {last!r}")
+        return self._retrying(
+            f"{service}'s arrival event",
+            lambda: self._node.service_builder(name)
+            .event()
+            .max_notifiers(limits.max_publishers)
+            .max_listeners(limits.max_subscribers)
+            .max_nodes(limits.max_nodes)
+            .event_id_max_value(0)
+            .open_or_create(),
+        )
 
     def _channel(self, channel: str, vehicle: Optional[str]):
         if channel not in c.CHANNELS:
