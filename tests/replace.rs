@@ -221,7 +221,7 @@ fn a_user_program_that_crashes_hangs_or_writes_garbage_is_named_and_leaves_nothi
     fails_naming(
         &tmp.path().join("hang"),
         &scenario,
-        &["--replace", &flag, "--tick-timeout", "2"],
+        &["--replace", &flag, "--tick-timeout", "5"],
         &["no progress", "F1/planner"],
     );
 
