@@ -418,3 +418,20 @@ fn compare_puts_a_users_method_beside_the_papers_and_shoals() {
     let md = std::fs::read_to_string(out.join("compare.md")).unwrap();
     assert!(md.contains("vs yours (planner → `"), "{md}");
 }
+
+#[test]
+fn the_python_package_passes_its_own_unit_tests() {
+    // This checkout's package, whatever an editable install points at.
+    let o = std::process::Command::new(python3())
+        .args(["-m", "unittest", "discover", "-s", "python/tests", "-v"])
+        .current_dir(repo_root())
+        .env("PYTHONPATH", repo_root().join("python"))
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{said}");
+    assert!(
+        said.contains("Ran 6 tests") && said.contains("OK"),
+        "{said}"
+    );
+}
