@@ -483,13 +483,21 @@ class Node:
         finally:
             bell.close()
 
-    def _realtime(self) -> Iterator[Step]:
+    def _schedule(self) -> tuple[int, int, int, int]:
+        """The phased timer, as the Rust runtime's `schedule`: activation k
+        is due at epoch + phase + k·period (ns, monotonic); a restarted
+        process joins at its next activation. Returns (period, phase,
+        epoch, first k)."""
         period = max(int(round(self.args.period_s * 1e9)), 100_000)
         phase = max(int(round(self.args.phase_s * 1e9)), 0)
         epoch = self.args.epoch_mono_ns or time.monotonic_ns()
         k = 0
         if self.args.restart > 0:
             k = max(0, -(-(time.monotonic_ns() - epoch - phase) // period))
+        return period, phase, epoch, k
+
+    def _realtime(self) -> Iterator[Step]:
+        period, phase, epoch, k = self._schedule()
         self._notify_ready()
         self._next_stats_ns = c.STATS_EVERY_NS
         while not _STOP:
@@ -514,12 +522,7 @@ class Node:
             k += 1
 
     def _dataflow(self) -> Iterator[Step]:
-        period = max(int(round(self.args.period_s * 1e9)), 100_000)
-        phase = max(int(round(self.args.phase_s * 1e9)), 0)
-        epoch = self.args.epoch_mono_ns or time.monotonic_ns()
-        k = 0
-        if self.args.restart > 0:
-            k = max(0, -(-(time.monotonic_ns() - epoch - phase) // period))
+        period, phase, epoch, k = self._schedule()
         waitset = (
             iox2.WaitSetBuilder.new()
             .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
